@@ -1,0 +1,32 @@
+# Public targets: demo, test, plugin, bench. Each installs what it needs first (scripts/setup.sh,
+# idempotent), so any of them works as the first command on a fresh Debian 12 machine.
+SHELL := /bin/bash
+VENV := .venv/bin
+QVENV := .venv-qgis/bin
+QGIS_PROCESS := /usr/bin/qgis_process.bin
+export QT_QPA_PLATFORM := offscreen
+
+.PHONY: demo test test-core test-core-qgis test-qgis plugin bench setup setup-core
+
+setup:
+	@scripts/setup.sh apt venv qgis
+
+setup-core:
+	@scripts/setup.sh apt venv
+
+demo: setup-core
+	$(VENV)/gisroads demo --out out/demo
+
+## test: core suite on modern wheels, core suite on Debian's QGIS stack, provider suite in QGIS
+test: setup plugin
+	$(VENV)/python -m pytest -q tests --ignore=tests/qgis_provider
+	$(QVENV)/python -m pytest -q -p no:cacheprovider tests --ignore=tests/qgis_provider
+	$(QVENV)/python -m pytest -q -p no:cacheprovider tests/qgis_provider
+
+plugin: dist/gisroads_qgis.zip
+
+dist/gisroads_qgis.zip: scripts/build_plugin.sh metadata.txt $(shell git ls-files -co --exclude-standard gisroads processing_provider styles 2>/dev/null)
+	@scripts/build_plugin.sh
+
+bench: setup-core
+	$(VENV)/python bench/run.py --out out/bench

@@ -1,0 +1,211 @@
+"""Small shared types: a raster with its georeferencing, and the road-network output contract.
+
+Every road pipeline ends in a :class:`RoadNetwork`: three layers in the input's CRS,
+
+``road_centrelines``
+    LineString; ``road_id``, ``width_m``, ``length_m``, ``method``, ``score``.
+``road_polygons``
+    Polygon; ``road_id``, ``width_m``, ``area_m2``.
+``junctions``
+    Point; ``junction_id``, ``degree`` (number of road ends meeting there, >= 3).
+
+plus method-specific QA layers in ``RoadNetwork.qa``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import geopandas as gpd
+import numpy as np
+import pandas as pd
+import shapely
+from affine import Affine
+from pyproj import CRS
+
+CENTRELINES = "road_centrelines"
+POLYGONS = "road_polygons"
+JUNCTIONS = "junctions"
+
+#: Column names and dtypes of the three contract layers (geometry column excluded).
+CONTRACT_SCHEMA = {
+    CENTRELINES: {"road_id": "int64", "width_m": "float64", "length_m": "float64",
+                  "method": "object", "score": "float64"},
+    POLYGONS: {"road_id": "int64", "width_m": "float64", "area_m2": "float64"},
+    JUNCTIONS: {"junction_id": "int64", "degree": "int64"},
+}
+CONTRACT_GEOMETRY = {CENTRELINES: "LineString", POLYGONS: "Polygon", JUNCTIONS: "Point"}
+
+
+@dataclass(frozen=True)
+class GeoRaster:
+    """A raster array with the affine transform and CRS that place it on the ground.
+
+    Attributes
+    ----------
+    data : ndarray
+        ``(rows, cols)`` or ``(bands, rows, cols)``.
+    transform : affine.Affine
+        Pixel (col, row) to map (x, y) of the pixel's upper-left corner.
+    crs : pyproj.CRS or None
+    nodata : float or None
+    """
+
+    data: np.ndarray
+    transform: Affine
+    crs: CRS | None
+    nodata: float | None = None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(rows, cols)``."""
+        return tuple(self.data.shape[-2:])
+
+    @property
+    def pixel_size(self) -> float:
+        """Side of a (square) pixel in CRS units."""
+        return float(abs(self.transform.a))
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` in CRS units."""
+        rows, cols = self.shape
+        x0, y0 = self.transform * (0, 0)
+        x1, y1 = self.transform * (cols, rows)
+        return min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)
+
+    def xy_to_rowcol(self, x, y) -> tuple[np.ndarray, np.ndarray]:
+        """Integer pixel indices of map coordinates (no bounds check)."""
+        col, row = ~self.transform * (np.asarray(x, float), np.asarray(y, float))
+        return np.floor(row).astype(np.int64), np.floor(col).astype(np.int64)
+
+
+def _empty_layer(name: str, crs) -> gpd.GeoDataFrame:
+    columns = {c: pd.Series(dtype=t) for c, t in CONTRACT_SCHEMA[name].items()}
+    return gpd.GeoDataFrame(columns, geometry=gpd.GeoSeries([], crs=crs), crs=crs)
+
+
+@dataclass
+class RoadNetwork:
+    """The output contract of every road pipeline (see the module docstring).
+
+    Use :func:`network_from_centrelines` to build one from centre lines with widths.
+    """
+
+    centrelines: gpd.GeoDataFrame
+    polygons: gpd.GeoDataFrame
+    junctions: gpd.GeoDataFrame
+    qa: dict[str, gpd.GeoDataFrame] = field(default_factory=dict)
+
+    @property
+    def crs(self):
+        return self.centrelines.crs
+
+    def layers(self) -> dict[str, gpd.GeoDataFrame]:
+        """All layers by name, contract layers first."""
+        return {CENTRELINES: self.centrelines, POLYGONS: self.polygons,
+                JUNCTIONS: self.junctions, **self.qa}
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` unless the three contract layers have their schema."""
+        for name, frame in list(self.layers().items())[:3]:
+            missing = set(CONTRACT_SCHEMA[name]) - set(frame.columns)
+            if missing:
+                raise ValueError(f"layer {name!r} lacks columns {sorted(missing)}")
+            kinds = set(frame.geom_type.dropna()) - {CONTRACT_GEOMETRY[name]}
+            if kinds:
+                raise ValueError(f"layer {name!r} has {sorted(kinds)} geometries, "
+                                 f"expected {CONTRACT_GEOMETRY[name]}")
+            if frame.crs != self.crs:
+                raise ValueError(f"layer {name!r} is in another CRS than road_centrelines")
+
+
+def node_lines(lines) -> np.ndarray:
+    """Split lines at every crossing and shared vertex; returns simple LineStrings.
+
+    Parameters
+    ----------
+    lines : array_like of shapely geometries
+        LineStrings or MultiLineStrings.
+    """
+    lines = np.asarray(lines, dtype=object)
+    if len(lines) == 0:
+        return np.empty(0, dtype=object)
+    # A unary union of linework is fully noded: every crossing becomes a vertex shared by
+    # the pieces, and overlapping duplicates are dissolved.
+    return shapely.get_parts(shapely.union_all(shapely.get_parts(lines)))
+
+
+def line_end_degrees(lines, *, snap_m: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """End points of noded lines and how many line ends meet at each.
+
+    Parameters
+    ----------
+    lines : array_like of LineString
+        Already noded (see :func:`node_lines`).
+    snap_m : float
+        End points closer than this (CRS units) are the same node.
+
+    Returns
+    -------
+    nodes : ndarray, shape (n, 2)
+    degree : ndarray of int, shape (n,)
+    """
+    lines = np.asarray(lines, dtype=object)
+    if len(lines) == 0:
+        return np.empty((0, 2)), np.empty(0, dtype=np.int64)
+    ends = np.concatenate([shapely.get_coordinates(shapely.get_point(lines, 0)),
+                           shapely.get_coordinates(shapely.get_point(lines, -1))])
+    keys = np.round(ends / snap_m).astype(np.int64)
+    _, first, inverse, degree = np.unique(keys, axis=0, return_index=True,
+                                          return_inverse=True, return_counts=True)
+    return ends[first], degree
+
+
+def junctions_from_lines(lines, crs, *, snap_m: float = 1e-6) -> gpd.GeoDataFrame:
+    """Junction layer: nodes of the noded network where three or more line ends meet."""
+    nodes, degree = line_end_degrees(node_lines(lines), snap_m=snap_m)
+    keep = degree >= 3
+    return gpd.GeoDataFrame(
+        {"junction_id": np.arange(int(keep.sum()), dtype=np.int64),
+         "degree": degree[keep].astype(np.int64)},
+        geometry=shapely.points(nodes[keep]), crs=crs)
+
+
+def network_from_centrelines(centrelines: gpd.GeoDataFrame, *, method: str = "",
+                             qa: dict | None = None) -> RoadNetwork:
+    """Build the contract layers from centre lines that carry a ``width_m`` column.
+
+    Polygons are the centre lines buffered by half their width with flat caps and round
+    joins, one per road; junctions are the nodes where three or more noded line ends meet.
+
+    Parameters
+    ----------
+    centrelines : GeoDataFrame
+        LineStrings with ``width_m`` (metres, CRS units); optional ``road_id``, ``score``,
+        ``method``.
+    method : str
+        Fills ``method`` where the frame has none.
+    qa : dict of GeoDataFrame, optional
+        Method-specific QA layers, stored beside the contract layers.
+    """
+    crs = centrelines.crs
+    if len(centrelines) == 0:
+        return RoadNetwork(_empty_layer(CENTRELINES, crs), _empty_layer(POLYGONS, crs),
+                           _empty_layer(JUNCTIONS, crs), dict(qa or {}))
+    geoms = centrelines.geometry.values
+    width = centrelines["width_m"].to_numpy(float)
+    road_id = (centrelines["road_id"].to_numpy(np.int64) if "road_id" in centrelines
+               else np.arange(len(centrelines), dtype=np.int64))
+    score = (centrelines["score"].to_numpy(float) if "score" in centrelines
+             else np.full(len(centrelines), np.nan))
+    methods = (centrelines["method"].to_numpy(object) if "method" in centrelines
+               else np.full(len(centrelines), method, dtype=object))
+    lines = gpd.GeoDataFrame(
+        {"road_id": road_id, "width_m": width, "length_m": shapely.length(geoms),
+         "method": methods, "score": score}, geometry=geoms, crs=crs)
+    areas = shapely.buffer(geoms, width / 2.0, cap_style="flat", join_style="round")
+    polygons = gpd.GeoDataFrame(
+        {"road_id": road_id, "width_m": width, "area_m2": shapely.area(areas)},
+        geometry=areas, crs=crs).explode(index_parts=False).reset_index(drop=True)
+    polygons["area_m2"] = shapely.area(polygons.geometry.values)
+    return RoadNetwork(lines, polygons, junctions_from_lines(geoms, crs), dict(qa or {}))

@@ -1,0 +1,1 @@
+"""File I/O: the only place gisroads touches files (LAS/LAZ, rasters, vector layers)."""

@@ -1,0 +1,131 @@
+"""Rasters (rasterio): read GeoTIFFs and georeferenced images, write GeoTIFFs atomically.
+
+A plain PNG/JPEG carries no georeferencing; it is read only when the caller gives its pixel
+size and CRS explicitly, so nothing downstream ever guesses units.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import rasterio
+from affine import Affine
+from pyproj import CRS
+from rasterio.errors import RasterioIOError
+
+from ..geo import GeoRaster
+from .vector import atomic_path
+
+
+class RasterError(ValueError):
+    """A raster that cannot be used as given: unreadable, not georeferenced, or all NaN."""
+
+
+def _crs(rio_crs) -> CRS | None:
+    return None if rio_crs is None else CRS.from_user_input(rio_crs.to_wkt())
+
+
+def read_raster(path, *, pixel_size: float | None = None, crs=None,
+                origin: tuple[float, float] = (0.0, 0.0), bands=None) -> GeoRaster:
+    """Read a raster with its georeferencing.
+
+    Parameters
+    ----------
+    path : str or Path
+        GeoTIFF (or any GDAL raster with a geotransform and CRS); a plain PNG/JPEG needs
+        ``pixel_size`` and ``crs``.
+    pixel_size : float, optional
+        Pixel side in CRS units, for images without georeferencing.
+    crs : optional
+        CRS for images without one (anything pyproj accepts: ``"EPSG:32633"``).
+    origin : (x, y)
+        Map coordinates of the upper-left corner, with ``pixel_size``.
+    bands : list of int, optional
+        1-based band numbers; all by default.
+
+    Returns
+    -------
+    GeoRaster
+        ``data`` of shape ``(bands, rows, cols)``; nodata cells of float rasters are NaN.
+
+    Raises
+    ------
+    RasterError
+        Unreadable file, missing georeferencing without ``pixel_size``/``crs``, or a raster
+        with no valid cell.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise RasterError(f"{path}: no such file")
+    try:
+        with rasterio.open(path) as src:
+            data = src.read(bands)
+            transform, file_crs, nodata = src.transform, _crs(src.crs), src.nodata
+    except RasterioIOError as err:
+        raise RasterError(f"{path}: not a readable raster ({err})") from None
+    georeferenced = transform != Affine.identity() and file_crs is not None
+    if pixel_size is not None or crs is not None:
+        if pixel_size is None or crs is None:
+            raise RasterError(f"{path}: give both a pixel size and a CRS")
+        transform = Affine(pixel_size, 0, origin[0], 0, -pixel_size, origin[1])
+        file_crs = CRS.from_user_input(crs)
+    elif not georeferenced:
+        raise RasterError(f"{path}: the image has no georeferencing; give its pixel size "
+                          "(metres) and CRS explicitly")
+    if np.issubdtype(data.dtype, np.floating):
+        if nodata is not None and not np.isnan(nodata):
+            data = np.where(data == nodata, np.nan, data)
+        if np.isnan(data).all():
+            raise RasterError(f"{path}: every cell is NaN or nodata")
+    return GeoRaster(data, transform, file_crs, nodata)
+
+
+def write_geotiff(path, raster: GeoRaster, *, nodata: float | None = None,
+                  band_names: list[str] | None = None) -> Path:
+    """Write a GeoRaster as a tiled, deflate-compressed GeoTIFF, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    raster : GeoRaster
+        2-D or ``(bands, rows, cols)`` data.
+    nodata : float, optional
+        Stored nodata value; defaults to ``raster.nodata``, and to NaN for float data.
+    band_names : list of str, optional
+        Band descriptions shown by QGIS.
+    """
+    data = raster.data[np.newaxis] if raster.data.ndim == 2 else raster.data
+    if nodata is None:
+        nodata = raster.nodata
+    if nodata is None and np.issubdtype(data.dtype, np.floating):
+        nodata = np.nan
+    rows, cols = data.shape[1:]
+    profile = dict(driver="GTiff", height=rows, width=cols, count=data.shape[0],
+                   dtype=data.dtype, transform=raster.transform, nodata=nodata,
+                   crs=None if raster.crs is None else raster.crs.to_wkt(),
+                   compress="deflate")
+    if rows >= 256 and cols >= 256:
+        profile.update(tiled=True, blockxsize=256, blockysize=256)
+    with atomic_path(path, suffix=".tif") as tmp:
+        with rasterio.open(tmp, "w", **profile) as dst:
+            dst.write(data)
+            for i, name in enumerate(band_names or [], start=1):
+                dst.set_band_description(i, name)
+    return Path(path)
+
+
+def raster_info(path) -> dict:
+    """Header facts of a raster: size, bands, dtype, CRS, pixel size, extent."""
+    path = Path(path)
+    try:
+        with rasterio.open(path) as src:
+            crs = _crs(src.crs)
+            return {"path": str(path), "driver": src.driver, "width": src.width,
+                    "height": src.height, "bands": src.count, "dtype": src.dtypes[0],
+                    "crs": crs.name if crs else None, "epsg": crs.to_epsg() if crs else None,
+                    "pixel_size": [abs(src.transform.a), abs(src.transform.e)],
+                    "georeferenced": crs is not None and src.transform != Affine.identity(),
+                    "extent": list(src.bounds), "nodata": src.nodata,
+                    "band_names": list(src.descriptions)}
+    except RasterioIOError as err:
+        raise RasterError(f"{path}: not a readable raster ({err})") from None

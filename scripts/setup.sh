@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# Installs everything gisroads needs on Debian 12, idempotently:
+#   apt   Debian's QGIS and the Debian Python stack QGIS embeds (see README, "Two environments")
+#   venv  .venv: the standalone environment, modern wheels from PyPI
+#   qgis  .venv-qgis: Debian's Python with system site-packages, numpy pinned to Debian's,
+#         shapely 2 built from source against the system GEOS
+# Each step leaves a stamp keyed on the files it depends on, so a second run is quick.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+STAMPS=.stamps
+mkdir -p "$STAMPS"
+
+APT_PACKAGES=(qgis python3-qgis qgis-providers python3-skimage python3-geopandas python3-rasterio
+  python3-pulp python3-pytest python3-pip python3-venv coinor-cbc libgeos-dev build-essential
+  python3-dev proj-data)
+
+as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
+
+step_apt() {
+  local missing=()
+  for p in "${APT_PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  [ ${#missing[@]} -eq 0 ] && return
+  echo "setup: installing Debian packages: ${missing[*]}"
+  as_root apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq --no-install-recommends "${missing[@]}"
+}
+
+stamp_for() { echo "$STAMPS/$1-$(cat "${@:2}" | sha1sum | cut -c1-12)"; }
+
+step_venv() {
+  local stamp; stamp=$(stamp_for venv pyproject.toml scripts/setup.sh)
+  [ -f "$stamp" ] && [ -x .venv/bin/python ] && return
+  echo "setup: building .venv (standalone, PyPI wheels)"
+  rm -rf .venv
+  /usr/bin/python3 -m venv .venv
+  .venv/bin/pip install -q --upgrade pip
+  .venv/bin/pip install -q -e '.[test]'
+  rm -f "$STAMPS"/venv-*; touch "$stamp"
+}
+
+step_qgis() {
+  local stamp; stamp=$(stamp_for qgis pyproject.toml scripts/setup.sh qgis-constraints.txt)
+  [ -f "$stamp" ] && [ -x .venv-qgis/bin/python ] && return
+  echo "setup: building .venv-qgis (Debian's QGIS Python stack + shapely 2 from source)"
+  rm -rf .venv-qgis
+  /usr/bin/python3 -m venv --system-site-packages .venv-qgis
+  # Debian's pyproj finds PROJ's data under sys.prefix, which a venv moves away from /usr.
+  mkdir -p .venv-qgis/share && ln -s /usr/share/proj .venv-qgis/share/proj
+  # Only packages Debian lacks come from PyPI; everything linking GEOS/GDAL/PROJ is Debian's,
+  # except shapely 2, compiled here against the system GEOS.
+  .venv-qgis/bin/pip install -q -c qgis-constraints.txt --no-binary shapely \
+    "shapely>=2" laspy lazrs pytest-qgis
+  .venv-qgis/bin/pip install -q --no-deps --no-build-isolation -e .
+  .venv-qgis/bin/python -c "import numpy, shapely, geopandas, rasterio, skimage, qgis.core; \
+assert numpy.__version__.startswith('1.'), numpy.__version__"
+  rm -f "$STAMPS"/qgis-*; touch "$stamp"
+}
+
+for step in "${@:-apt venv qgis}"; do
+  for s in $step; do "step_$s"; done
+done
