@@ -69,14 +69,20 @@ class GeoRaster:
     def bounds(self) -> tuple[float, float, float, float]:
         """``(xmin, ymin, xmax, ymax)`` in CRS units."""
         rows, cols = self.shape
-        x0, y0 = self.transform * (0, 0)
-        x1, y1 = self.transform * (cols, rows)
+        x0, y0 = _apply(self.transform, 0, 0)
+        x1, y1 = _apply(self.transform, cols, rows)
         return min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)
 
     def xy_to_rowcol(self, x, y) -> tuple[np.ndarray, np.ndarray]:
         """Integer pixel indices of map coordinates (no bounds check)."""
-        col, row = ~self.transform * (np.asarray(x, float), np.asarray(y, float))
+        col, row = _apply(~self.transform, np.asarray(x, float), np.asarray(y, float))
         return np.floor(row).astype(np.int64), np.floor(col).astype(np.int64)
+
+
+def _apply(t: Affine, u, v):
+    """``t`` applied to coordinates; spelt out because affine 3 deprecates ``t * (u, v)``
+    and the ``@`` that replaces it does not exist in Debian's affine 2."""
+    return t.a * u + t.b * v + t.c, t.d * u + t.e * v + t.f
 
 
 def _empty_layer(name: str, crs) -> gpd.GeoDataFrame:

@@ -334,8 +334,9 @@ class LasPointWriter:
             record.intensity = intensity
         if classification is not None:
             record.classification = classification
-        record.return_number = 1 if return_number is None else return_number
-        record.number_of_returns = 1 if number_of_returns is None else number_of_returns
+        record.return_number = np.ones(n, np.uint8) if return_number is None else return_number
+        record.number_of_returns = (np.ones(n, np.uint8) if number_of_returns is None
+                                    else number_of_returns)
         self._writer.write_points(record)
         self.count += n
 

@@ -1,0 +1,54 @@
+import sqlite3
+
+import geopandas as gpd
+import pytest
+import shapely
+
+from gisroads.geo import network_from_centrelines
+from gisroads.io.vector import list_layers, read_layer, write_geopackage
+
+
+def small_network():
+    lines = gpd.GeoDataFrame({"width_m": [8.0, 6.0]},
+                             geometry=[shapely.LineString([(0, 50), (100, 50)]),
+                                       shapely.LineString([(50, 0), (50, 100)])],
+                             crs="EPSG:32754")
+    return network_from_centrelines(lines, method="test")
+
+
+def test_multi_layer_geopackage_with_styles(tmp_path):
+    net = small_network()
+    path = write_geopackage(tmp_path / "net.gpkg", net.layers())
+    assert list_layers(path) == ["road_centrelines", "road_polygons", "junctions"]
+    back = read_layer(path)
+    assert back.crs.to_epsg() == 32754 and len(back) == 2
+    assert set(back.columns) >= {"road_id", "width_m", "length_m", "method", "score"}
+    con = sqlite3.connect(path)
+    rows = con.execute("SELECT f_table_name, f_geometry_column, useAsDefault, styleQML "
+                       "FROM layer_styles").fetchall()
+    con.close()
+    assert {r[0] for r in rows} == {"road_centrelines", "road_polygons", "junctions"}
+    assert all(r[1] == "geom" and r[2] == 1 and r[3].lstrip().startswith("<!DOCTYPE qgis")
+               for r in rows)
+    assert [p.name for p in tmp_path.iterdir()] == ["net.gpkg"]
+
+
+def test_failed_write_keeps_previous_file_and_leaves_no_temporary(tmp_path):
+    target = tmp_path / "net.gpkg"
+    write_geopackage(target, small_network().layers())
+    before = target.read_bytes()
+    bad = {"road_centrelines": small_network().centrelines, "broken": "not a frame"}
+    with pytest.raises(AttributeError):
+        write_geopackage(target, bad)
+    assert target.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["net.gpkg"]
+
+
+def test_read_layer_reprojects_and_refuses_bad_paths(tmp_path):
+    path = write_geopackage(tmp_path / "n.gpkg", small_network().layers())
+    wgs = read_layer(path, "junctions", crs="EPSG:4326")
+    assert wgs.crs.to_epsg() == 4326 and wgs.geometry.y.iloc[0] < 0  # UTM 54 south
+    with pytest.raises(FileNotFoundError):
+        read_layer(tmp_path / "none.gpkg")
+    with pytest.raises(ValueError, match=".gpkg"):
+        write_geopackage(tmp_path / "n.shp", small_network().layers())
