@@ -1,0 +1,181 @@
+"""gisroads benchmarks (``make bench``): speed and peak memory, each beside a baseline run here.
+
+Every case runs in its own subprocess, so its peak resident memory is its own. Results go to
+``OUT/results.json`` and ``OUT/results.md``; each case also draws a PNG quick-look of what it
+made, to be looked at.
+
+Cases
+-----
+synth_cloud
+    A synthetic scene rendered as an airborne point cloud and streamed to LAZ. Baseline: laspy
+    writing the same number of uniform random points to LAZ (the bare compression cost).
+evaluate
+    The evaluator on a road network of >= 10 km against a degraded copy. Baseline: one
+    shapely union + buffer + intersection of the same lines (the bare geometry of a buffer
+    metric).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _timed(func, *args, **kwargs):
+    start = time.perf_counter()
+    result = func(*args, **kwargs)
+    return result, time.perf_counter() - start
+
+
+def case_synth_cloud(out: Path, size_m: float, density: float) -> dict:
+    import laspy
+
+    from gisroads.io.las import read_las
+    from gisroads.io.quicklook import write_quicklook
+    from gisroads.synthetic import make_scene, render_cloud, write_cloud
+    from gisroads.geo import GeoRaster
+
+    scene, layout_s = _timed(make_scene, seed=0, size_m=(size_m, size_m))
+    rendered, render_s = _timed(lambda: sum(len(c) for c in render_cloud(
+        scene, density_per_m2=density, seed=0)))
+    with tempfile.TemporaryDirectory(dir=out) as tmp:
+        path = Path(tmp) / "cloud.laz"
+        count, write_s = _timed(write_cloud, scene, path, density_per_m2=density, seed=0)
+        size_mb = path.stat().st_size / 1e6
+        rng = np.random.default_rng(0)
+        header = laspy.LasHeader(point_format=6, version="1.4")
+        header.scales = [0.001] * 3
+        baseline_path = Path(tmp) / "baseline.laz"
+
+        def bare_laz():
+            with laspy.open(baseline_path, mode="w", header=header, do_compress=True,
+                            laz_backend=laspy.LazBackend.LazrsParallel) as writer:
+                for start in range(0, count, 2_000_000):
+                    n = min(2_000_000, count - start)
+                    record = laspy.ScaleAwarePointRecord.zeros(n, header=header)
+                    record.x, record.y = rng.uniform(0, size_m, (2, n))
+                    record.z = rng.uniform(0, 30, n)
+                    record.intensity = rng.integers(0, 65535, n)
+                    writer.write_points(record)
+        _, baseline_s = _timed(bare_laz)
+        window = (scene.extent[0], scene.extent[1], scene.extent[0] + 200, scene.extent[1] + 200)
+        sample = read_las(path, bbox=window)
+    cell = 0.5
+    cols = rows = int(200 / cell)
+    c = ((sample.xyz[:, 0] - window[0]) / cell).astype(int).clip(0, cols - 1)
+    r = ((window[3] - sample.xyz[:, 1]) / cell).astype(int).clip(0, rows - 1)
+    image = np.zeros((rows, cols))
+    np.maximum.at(image, (r, c), sample.intensity.astype(float))
+    from affine import Affine
+    truth = scene.truth.centrelines.cx[window[0]:window[2], window[1]:window[3]]
+    write_quicklook(out / "synth_cloud.png",
+                    [(truth, dict(color="red", linewidth=1, label="truth centre lines"))],
+                    background=GeoRaster(image, Affine(cell, 0, window[0], 0, -cell, window[3]),
+                                         scene.crs),
+                    title=f"synthetic cloud: max intensity per {cell} m cell, 200 m window")
+    return {"points": int(count), "area_km2": size_m ** 2 / 1e6, "density_per_m2": density,
+            "layout_s": layout_s, "render_s": render_s,
+            "render_points_per_s": rendered / render_s, "write_laz_s": write_s,
+            "write_laz_points_per_s": count / write_s, "laz_mb": size_mb,
+            "baseline_bare_laz_s": baseline_s,
+            "ratio_write_to_bare_laz": write_s / baseline_s}
+
+
+def case_evaluate(out: Path, size_m: float) -> dict:
+    import shapely
+
+    from gisroads.evaluate import apls_score, area_metrics, buffer_metrics, topology_metrics
+    from gisroads.evaluate import match_layers
+    from gisroads.geo import network_from_centrelines
+    from gisroads.io.quicklook import write_quicklook
+    from gisroads.synthetic import make_scene
+    from gisroads.synthetic.perturb import perturb_lines
+
+    truth = make_scene(seed=1, size_m=(size_m, size_m)).truth
+    reference = truth.centrelines
+    extracted = perturb_lines(reference, shift_m=1.0, jitter_m=0.7, drop_fraction=0.1,
+                              false_roads=8, seed=1)
+    extracted_polygons = network_from_centrelines(extracted).polygons
+    length_km = float(reference.length.sum()) / 1000
+    times = {}
+    for name, func in [
+        ("buffer", lambda: buffer_metrics(extracted, reference, buffer_m=3.0)),
+        ("topology", lambda: topology_metrics(extracted, reference)),
+        ("apls", lambda: apls_score(extracted, reference)),
+        ("area", lambda: area_metrics(extracted_polygons, truth.polygons, cell_m=0.5)),
+    ]:
+        _, times[name] = _timed(func)
+
+    def bare_buffer():
+        union = shapely.union_all(reference.geometry.values)
+        return shapely.length(shapely.intersection(
+            shapely.union_all(extracted.geometry.values), shapely.buffer(union, 3.0)))
+    _, baseline_s = _timed(bare_buffer)
+    qa = match_layers(extracted, reference, buffer_m=3.0)
+    write_quicklook(out / "evaluate.png", [
+        (truth.polygons, dict(color="khaki", alpha=0.5)),
+        (qa["eval_reference"][qa["eval_reference"].status == "FN"],
+         dict(color="red", linewidth=2.5, label="missed (FN)")),
+        (qa["eval_extracted"][qa["eval_extracted"].status == "TP"],
+         dict(color="green", linewidth=1, label="matched (TP)")),
+        (qa["eval_extracted"][qa["eval_extracted"].status == "FP"],
+         dict(color="magenta", linewidth=1.5, label="false (FP)")),
+    ], title=f"evaluation benchmark: {length_km:.1f} km of reference roads")
+    return {"reference_km": length_km, **{f"{k}_s": v for k, v in times.items()},
+            "baseline_bare_buffer_s": baseline_s,
+            "ratio_buffer_to_bare": times["buffer"] / baseline_s}
+
+
+CASES = {"synth_cloud": case_synth_cloud, "evaluate": case_evaluate}
+
+
+def run_case(name: str, out: Path, params: dict) -> dict:
+    """Run one case in a fresh interpreter, which reports its own peak resident memory."""
+    command = [sys.executable, __file__, "--out", str(out), "--case", name,
+               "--params", json.dumps(params)]
+    done = subprocess.run(command, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"benchmark {name} failed:\n{done.stderr}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--out", type=Path, default=Path("out/bench"))
+    parser.add_argument("--case", choices=sorted(CASES), help="run one case (internal)")
+    parser.add_argument("--params", default="{}")
+    parser.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    if args.case:
+        result = CASES[args.case](args.out, **json.loads(args.params))
+        result["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        print(json.dumps(result))
+        return
+    plan = {"synth_cloud": {"size_m": 400.0 if args.quick else 1000.0,
+                            "density": 4.0 if args.quick else 20.0},
+            "evaluate": {"size_m": 600.0 if args.quick else 1500.0}}
+    results = {}
+    for name, params in plan.items():
+        print(f"running {name} {params} ...", flush=True)
+        results[name] = {"params": params, **run_case(name, args.out, params)}
+        print(json.dumps(results[name], indent=2), flush=True)
+    (args.out / "results.json").write_text(json.dumps(results, indent=2))
+    lines = ["| case | figure | value |", "|---|---|---|"]
+    lines += [f"| {case} | {key} | {value:.4g} |" if isinstance(value, float)
+              else f"| {case} | {key} | {value} |"
+              for case, figures in results.items() for key, value in figures.items()
+              if key != "params"]
+    (args.out / "results.md").write_text("\n".join(lines) + "\n")
+    print(f"results in {args.out}/results.json and results.md; quick-looks *.png")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,199 @@
+"""The ``gisroads`` command: one subcommand per job, progress on stderr, ``--json`` for scripts.
+
+Errors in the input (unreadable or empty files, missing georeferencing, bad values) print one
+line, ``gisroads: error: ...``, and exit with status 2; nothing is written.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from . import __version__
+from .progress import to_json
+
+EPILOG = "Distances are in metres. Outputs are written in the input's CRS."
+
+
+class _ProgressBar:
+    """A one-line progress bar on stderr (a line per 10 % when stderr is not a terminal)."""
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self.tty = sys.stderr.isatty()
+        self.last = -1
+
+    def __call__(self, fraction: float, message: str = "") -> None:
+        if not self.enabled:
+            return
+        percent = int(fraction * 100)
+        if self.tty:
+            bar = "#" * (percent // 4)
+            sys.stderr.write(f"\r[{bar:<25}] {percent:3d}% {message[:40]:<40}")
+            if fraction >= 1.0:
+                sys.stderr.write("\n")
+        elif percent // 10 != self.last // 10 or fraction >= 1.0 and self.last < 100:
+            sys.stderr.write(f"{percent:3d}% {message}\n")
+        else:
+            return
+        self.last = percent
+        sys.stderr.flush()
+
+
+def _print(result, as_json: bool, text: str) -> None:
+    print(to_json(result) if as_json else text)
+
+
+def _size(text: str) -> tuple[float, float]:
+    try:
+        parts = [float(v) for v in text.lower().split("x")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT in metres") from None
+    if len(parts) == 1:
+        parts *= 2
+    if len(parts) != 2 or min(parts) < 100:
+        raise argparse.ArgumentTypeError("size is WIDTHxHEIGHT in metres, each at least 100")
+    return parts[0], parts[1]
+
+
+def _positive(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text} must be positive")
+    return value
+
+
+def _format_info(info: dict) -> str:
+    if info["kind"] == "vector":
+        return "\n".join(f"{l['layer']}: {l['features']} features, {'/'.join(l['geometry'])},"
+                         f" CRS {l['crs']} (EPSG {l['epsg']}), extent {l['extent']}"
+                         for l in info["layers"])
+    skip = {"kind", "path"}
+    return "\n".join([f"{info['path']} ({info['kind']})"] +
+                     [f"  {k}: {v}" for k, v in info.items() if k not in skip])
+
+
+def cmd_info(args) -> int:
+    from .jobs import describe_file
+    info = describe_file(args.file)
+    _print(info, args.json, _format_info(info))
+    return 0
+
+
+def cmd_synth(args) -> int:
+    from .jobs import synth_job
+    paths = synth_job(args.out, size_m=args.size, seed=args.seed,
+                      density_per_m2=args.density, pixel_m=args.pixel,
+                      cloud=not args.no_cloud, image=not args.no_image,
+                      progress=_ProgressBar(not args.json))
+    _print(paths, args.json, "\n".join(f"{k}: {v}" for k, v in paths.items()))
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    from .evaluate import format_report
+    from .jobs import evaluate_job
+    results = evaluate_job(args.extracted, args.reference, buffer_m=args.buffer,
+                           cell_m=args.cell, junction_radius_m=args.junction_radius,
+                           extracted_polygons=args.extracted_polygons,
+                           reference_polygons=args.reference_polygons,
+                           valid_area=args.valid_area, qa_path=args.qa,
+                           progress=_ProgressBar(not args.json))
+    _print(results, args.json, format_report(results))
+    return 0
+
+
+def cmd_demo(args) -> int:
+    from .evaluate import format_report
+    from .jobs import demo_job
+    result = demo_job(args.out, seed=args.seed, progress=_ProgressBar(not args.json))
+    _print(result, args.json,
+           format_report(result["evaluation"]) + f"\n\noutputs in {args.out}/, quick-look: "
+           f"{result['quicklook']}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="gisroads", epilog=EPILOG,
+        description="Road networks from airborne LiDAR and aerial imagery, as GIS layers.")
+    parser.add_argument("--version", action="version", version=f"gisroads {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def add(name, func, help_text, description):
+        p = sub.add_parser(name, help=help_text, description=description, epilog=EPILOG)
+        p.add_argument("--json", action="store_true", help="print the result as JSON")
+        p.set_defaults(func=func)
+        return p
+
+    p = add("info", cmd_info, "describe a point cloud, raster or vector file",
+            "Print what a file holds: for LAS/LAZ its version, point format, point count, "
+            "CRS and units (feet are reported and converted), extent; for rasters the size, "
+            "bands, CRS and pixel size; for vector files each layer's features and CRS.")
+    p.add_argument("file", type=Path, help="LAS/LAZ, GeoTIFF or vector file")
+
+    p = add("synth", cmd_synth, "write a synthetic scene with exact ground truth",
+            "Write a synthetic suburban scene: truth.gpkg (road centre lines with widths, "
+            "road polygons, junctions, scene objects), cloud.laz (airborne point cloud) and "
+            "image.tif + dsm.tif (R,G,B,NIR orthoimage and surface model).")
+    p.add_argument("-o", "--out", type=Path, required=True, help="output folder")
+    p.add_argument("--size", type=_size, default=(400.0, 400.0), metavar="WxH",
+                   help="scene size in metres, e.g. 400x300 (default 400x400)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--density", type=_positive, default=10.0,
+                   help="point density in points per m² (default 10)")
+    p.add_argument("--pixel", type=_positive, default=0.25,
+                   help="image pixel size in metres (default 0.25)")
+    p.add_argument("--no-cloud", action="store_true", help="skip the point cloud")
+    p.add_argument("--no-image", action="store_true", help="skip the image and DSM")
+
+    p = add("evaluate", cmd_evaluate, "score extracted roads against a reference",
+            "Compare extracted road centre lines with reference ones: completeness, "
+            "correctness, quality and RMS offset within a buffer (Wiedemann et al. 1998), "
+            "connected components and junction precision/recall, an APLS path-length score, "
+            "and, when road polygons are available on both sides, Boyko & Funkhouser's "
+            "area precision/recall/quality with spill size and direction.")
+    p.add_argument("extracted", type=Path,
+                   help="extracted centre lines (GeoPackage: layer road_centrelines)")
+    p.add_argument("reference", type=Path, help="reference centre lines (any line file)")
+    p.add_argument("--buffer", type=_positive, default=3.0,
+                   help="buffer width in metres, about half a carriageway (default 3)")
+    p.add_argument("--cell", type=_positive, default=0.5,
+                   help="grid cell for the area metrics in metres (default 0.5)")
+    p.add_argument("--junction-radius", type=_positive, default=10.0,
+                   help="distance within which junctions match, metres (default 10)")
+    p.add_argument("--extracted-polygons", type=Path,
+                   help="road area of the extraction (default: its road_polygons layer)")
+    p.add_argument("--reference-polygons", type=Path,
+                   help="reference road area (default: its road_polygons layer)")
+    p.add_argument("--valid-area", type=Path,
+                   help="polygon file: score only inside it (e.g. the surveyed area)")
+    p.add_argument("--qa", type=Path,
+                   help="write matched/missed/false pieces to this GeoPackage")
+
+    p = add("demo", cmd_demo, "run the demo on a synthetic scene",
+            "Write a synthetic scene and its truth, degrade the truth into a stand-in "
+            "extraction, score it and draw a quick-look PNG.")
+    p.add_argument("-o", "--out", type=Path, default=Path("out/demo"), help="output folder")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from .io.las import LasError
+    from .io.raster import RasterError
+    from .progress import Cancelled
+    try:
+        return args.func(args)
+    except (LasError, RasterError, ValueError, FileNotFoundError) as err:
+        print(f"gisroads: error: {err}", file=sys.stderr)
+        return 2
+    except (Cancelled, KeyboardInterrupt):
+        print("gisroads: cancelled; nothing written", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

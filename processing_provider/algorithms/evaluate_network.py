@@ -1,0 +1,113 @@
+"""Evaluate road network: buffer, topology, path-length and area scores against a reference."""
+from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutputNumber,
+                       QgsProcessingOutputString, QgsProcessingParameterDistance,
+                       QgsProcessingParameterFeatureSink, QgsProcessingParameterFeatureSource,
+                       QgsProcessingParameterNumber)
+
+from gisroads.evaluate import evaluate_network, format_report, match_layers
+from gisroads.progress import to_json
+
+from ..convert import frame_to_sink, gisroads_errors, source_to_frame, style_on_load
+from .base import GisroadsAlgorithm
+
+HEADLINE = {"COMPLETENESS": ("buffer", "completeness"), "CORRECTNESS": ("buffer", "correctness"),
+            "QUALITY": ("buffer", "quality"), "RMS_M": ("buffer", "rms_m"),
+            "APLS": ("apls", "apls")}
+
+
+class EvaluateRoadNetwork(GisroadsAlgorithm):
+    NAME = "evaluateroadnetwork"
+    DISPLAY_NAME = "Evaluate road network"
+    GROUP = "Evaluation"
+    HELP = (
+        "<p>Scores extracted road centre lines against reference centre lines.</p>"
+        "<p><b>Buffer scores</b> (Wiedemann et al. 1998): <i>completeness</i> is the share of "
+        "the reference length lying within the buffer of the extraction, <i>correctness</i> "
+        "the share of the extracted length within the buffer of the reference, "
+        "<i>quality</i> = matched extracted length / (extracted length + unmatched "
+        "reference length), <i>RMS</i> the root-mean-square distance of matched extracted "
+        "lines to the reference.</p>"
+        "<p><b>Topology</b>: connected components, junction precision and recall. "
+        "<b>APLS</b>: a path-length similarity in [0, 1] (1 = same shortest routes). "
+        "<b>Area scores</b> (Boyko &amp; Funkhouser 2011), when road polygons are given on "
+        "both sides: precision, recall, quality on a grid, average spill size and "
+        "prevailing spill direction (positive: the extraction spills outwards).</p>"
+        "<p>Outputs: the extracted and reference lines cut into matched (TP), false (FP) "
+        "and missed (FN) pieces, and the scores as numbers and as a JSON report.</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        lines = [QgsProcessing.TypeVectorLine]
+        polygons = [QgsProcessing.TypeVectorPolygon]
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            "EXTRACTED", self.tr("Extracted road centre lines"), lines))
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            "REFERENCE", self.tr("Reference road centre lines"), lines))
+        self.addParameter(QgsProcessingParameterDistance(
+            "BUFFER", self.tr("Buffer width (about half a carriageway)"), 3.0, "REFERENCE",
+            minValue=0.01))
+        self.addParameter(QgsProcessingParameterDistance(
+            "JUNCTION_RADIUS", self.tr("Junction matching radius"), 10.0, "REFERENCE",
+            minValue=0.01))
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            "EXTRACTED_POLYGONS", self.tr("Extracted road polygons (for area scores)"),
+            polygons, optional=True))
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            "REFERENCE_POLYGONS", self.tr("Reference road polygons (for area scores)"),
+            polygons, optional=True))
+        self.addParameter(QgsProcessingParameterNumber(
+            "CELL", self.tr("Grid cell for area scores (metres)"),
+            QgsProcessingParameterNumber.Double, 0.5, minValue=0.05))
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            "VALID_AREA", self.tr("Valid area: score only inside these polygons"),
+            polygons, optional=True))
+        self.addParameter(QgsProcessingParameterFeatureSink(
+            "EXTRACTED_QA", self.tr("Extracted pieces (TP/FP)"), QgsProcessing.TypeVectorLine))
+        self.addParameter(QgsProcessingParameterFeatureSink(
+            "REFERENCE_QA", self.tr("Reference pieces (TP/FN)"), QgsProcessing.TypeVectorLine))
+        for name in HEADLINE:
+            self.addOutput(QgsProcessingOutputNumber(name, self.tr(name.replace("_", " ").lower())))
+        self.addOutput(QgsProcessingOutputString("REPORT", self.tr("All scores (JSON)")))
+
+        for name, text in (("EXTRACTED", "the centre lines to score"),
+                           ("REFERENCE", "the reference (ground truth) centre lines"),
+                           ("BUFFER", "lines closer than this count as matched; metres"),
+                           ("JUNCTION_RADIUS", "junctions closer than this match; metres"),
+                           ("EXTRACTED_POLYGONS", "road area of the extraction, optional"),
+                           ("REFERENCE_POLYGONS", "reference road area, optional"),
+                           ("CELL", "cell size of the grid the areas are compared on"),
+                           ("VALID_AREA", "e.g. the surveyed area; optional"),
+                           ("EXTRACTED_QA", "extracted lines cut at the buffer, status TP/FP"),
+                           ("REFERENCE_QA", "reference lines cut at the buffer, status TP/FN")):
+            self.parameterDefinition(name).setHelp(self.tr(text))
+
+    def _frame(self, parameters, name, context, feedback):
+        source = self.parameterAsSource(parameters, name, context)
+        return None if source is None else source_to_frame(source, feedback)
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        extracted = self._frame(parameters, "EXTRACTED", context, feedback)
+        reference = self._frame(parameters, "REFERENCE", context, feedback)
+        if extracted is None or reference is None:
+            raise QgsProcessingException(self.tr("both line layers are required"))
+        buffer_m = self.parameterAsDouble(parameters, "BUFFER", context)
+        valid = self._frame(parameters, "VALID_AREA", context, feedback)
+        feedback.setProgressText(self.tr("scoring"))
+        with gisroads_errors():
+            results = evaluate_network(
+                extracted, reference, buffer_m=buffer_m,
+                cell_m=self.parameterAsDouble(parameters, "CELL", context),
+                junction_radius_m=self.parameterAsDouble(parameters, "JUNCTION_RADIUS", context),
+                valid_area=valid,
+                extracted_polygons=self._frame(parameters, "EXTRACTED_POLYGONS", context, feedback),
+                reference_polygons=self._frame(parameters, "REFERENCE_POLYGONS", context, feedback))
+            feedback.setProgress(70)
+            qa = match_layers(extracted, reference, buffer_m=buffer_m, valid_area=valid)
+        feedback.pushInfo(format_report(results))
+        outputs = {name: results[group][key] for name, (group, key) in HEADLINE.items()}
+        for param, layer in (("EXTRACTED_QA", "eval_extracted"), ("REFERENCE_QA", "eval_reference")):
+            outputs[param] = frame_to_sink(self, parameters, param, context, qa[layer],
+                                           "LineString", feedback)
+            style_on_load(context, outputs[param], layer)
+        outputs["REPORT"] = to_json(results)
+        feedback.setProgress(100)
+        return outputs

@@ -1,0 +1,22 @@
+"""The gisroads Processing provider: lists the algorithms."""
+from qgis.core import QgsProcessingProvider
+
+from .algorithms.evaluate_network import EvaluateRoadNetwork
+from .algorithms.open_network import OpenRoadNetwork
+from .algorithms.synthetic_scene import SyntheticRoadScene
+
+
+class GisroadsProvider(QgsProcessingProvider):
+    def id(self):
+        return "gisroads"
+
+    def name(self):
+        return "gisroads"
+
+    def longName(self):
+        import gisroads
+        return f"gisroads {gisroads.__version__}: road networks from LiDAR and imagery"
+
+    def loadAlgorithms(self):  # noqa: N802
+        for algorithm in (EvaluateRoadNetwork(), SyntheticRoadScene(), OpenRoadNetwork()):
+            self.addAlgorithm(algorithm)

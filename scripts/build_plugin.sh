@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Assembles the QGIS plugin folder gisroads_qgis/ (processing_provider/ at its root, plus
+# metadata.txt, the gisroads core and styles/) and zips it into dist/gisroads_qgis.zip,
+# the form QGIS's "Install from ZIP" and a profile's plugin folder take.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+build=$(mktemp -d)
+trap 'rm -rf "$build"' EXIT
+plugin="$build/gisroads_qgis"
+mkdir -p "$plugin"
+cp -r processing_provider/. "$plugin/"
+cp metadata.txt "$plugin/"
+cp -r gisroads styles "$plugin/"
+find "$plugin" -name "__pycache__" -prune -exec rm -rf {} +
+mkdir -p dist
+rm -f dist/gisroads_qgis.zip.tmp
+(cd "$build" && python3 -m zipfile -c "$OLDPWD/dist/gisroads_qgis.zip.tmp" gisroads_qgis)
+mv dist/gisroads_qgis.zip.tmp dist/gisroads_qgis.zip
+echo "built dist/gisroads_qgis.zip"

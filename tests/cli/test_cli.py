@@ -1,0 +1,90 @@
+"""The gisroads command as a user runs it: a subprocess, exit codes, stdout/stderr, files."""
+import json
+import subprocess
+import sys
+
+import pytest
+import shapely
+
+from gisroads.io.vector import read_layer, write_geopackage
+
+
+def gisroads(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "gisroads.cli", *map(str, args)],
+                          capture_output=True, text=True, cwd=cwd, timeout=600)
+
+
+def test_help_explains_every_subcommand():
+    top = gisroads("--help")
+    assert top.returncode == 0
+    for command in ("info", "synth", "evaluate", "demo"):
+        assert command in top.stdout
+        sub = gisroads(command, "--help")
+        assert sub.returncode == 0 and "--json" in sub.stdout and "metres" in sub.stdout
+
+
+def test_info_reports_units_of_every_real_file(lidar_dir):
+    for path in sorted(lidar_dir.glob("*.laz")):
+        result = gisroads("info", path, "--json")
+        assert result.returncode == 0, result.stderr
+        info = json.loads(result.stdout)
+        assert info["point_count"] > 0 and info["horizontal_unit"]
+        if path.name == "autzen_trim.laz":
+            assert info["horizontal_unit"] == "foot" and info["unit_to_metre"] == 0.3048
+            assert info["extent_m"][2] - info["extent_m"][0] == pytest.approx(
+                (info["extent"][2] - info["extent"][0]) * 0.3048)
+    text = gisroads("info", lidar_dir / "fusa.laz")
+    assert "WGS 84 / UTM zone 54S" in text.stdout and "277573" in text.stdout
+
+
+@pytest.mark.parametrize("content", ["truncated", "empty", "garbage"])
+def test_info_on_broken_laz_is_one_line_and_nonzero(lidar_dir, tmp_path, content):
+    data = (lidar_dir / "fusa.laz").read_bytes()
+    bad = tmp_path / "bad.laz"
+    bad.write_bytes({"truncated": data[:len(data) // 3], "empty": b"",
+                     "garbage": b"LASF" + b"\0" * 500}[content])
+    result = gisroads("info", bad)
+    assert result.returncode == 2
+    assert result.stdout == ""
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert result.stderr.startswith("gisroads: error: ") and "bad.laz" in result.stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["bad.laz"]
+
+
+def test_evaluate_real_truth_against_itself_and_shifted(lidar_dir, tmp_path):
+    truth = lidar_dir / "ground_truth" / "fusa" / "centrelines.geojson"
+    same = json.loads(gisroads("evaluate", truth, truth, "--json").stdout)
+    for key in ("completeness", "correctness", "quality"):
+        assert same["buffer"][key] == pytest.approx(1.0, abs=1e-9)
+    assert same["buffer"]["rms_m"] == pytest.approx(0.0, abs=1e-9)
+    shifted = read_layer(truth)
+    shifted.geometry = shapely.offset_curve(shifted.geometry.values, 5.0)  # 5 m sideways
+    write_geopackage(tmp_path / "shifted.gpkg", {"road_centrelines": shifted})
+    result = gisroads("evaluate", tmp_path / "shifted.gpkg", truth, "--buffer", "3",
+                      "--qa", tmp_path / "qa.gpkg", "--json")
+    assert result.returncode == 0, result.stderr
+    worse = json.loads(result.stdout)["buffer"]
+    assert worse["completeness"] < 0.6 and worse["correctness"] < 0.6
+    assert read_layer(tmp_path / "qa.gpkg", "eval_reference").status.isin(["TP", "FN"]).all()
+    text = gisroads("evaluate", tmp_path / "shifted.gpkg", truth)
+    assert "completeness" in text.stdout.lower()
+
+
+def test_evaluate_missing_file_is_an_error(tmp_path):
+    result = gisroads("evaluate", tmp_path / "none.gpkg", tmp_path / "none.gpkg")
+    assert result.returncode == 2 and "no such file" in result.stderr
+
+
+def test_synth_writes_scene_and_truth(tmp_path):
+    result = gisroads("synth", "-o", tmp_path / "s", "--size", "300", "--density", "1",
+                      "--pixel", "2", "--json")
+    assert result.returncode == 0, result.stderr
+    paths = json.loads(result.stdout)
+    assert set(paths) == {"truth", "cloud", "image", "dsm"}
+    info = json.loads(gisroads("info", paths["cloud"], "--json").stdout)
+    assert 0.9 * 90_000 < info["point_count"] < 1.1 * 90_000
+
+
+def test_bad_option_values_are_refused():
+    result = gisroads("synth", "-o", "x", "--size", "10x10")
+    assert result.returncode == 2 and "at least 100" in result.stderr

@@ -1,0 +1,68 @@
+"""The provider's algorithms in this process (pytest-qgis): cancel, conversions, errors."""
+import geopandas as gpd
+import numpy as np
+import pytest
+import shapely
+from qgis.core import (QgsApplication, QgsProcessingContext, QgsProcessingException,
+                       QgsProcessingFeedback, QgsVectorLayer)
+
+from processing_provider.convert import source_to_frame, to_pyproj, to_qgis
+from processing_provider.provider import GisroadsProvider
+
+
+@pytest.fixture(scope="module")
+def registry(qgis_app):
+    provider = GisroadsProvider()
+    QgsApplication.processingRegistry().addProvider(provider)
+    yield QgsApplication.processingRegistry()
+    QgsApplication.processingRegistry().removeProvider(provider)
+
+
+def run(registry, name, params, feedback=None):
+    algorithm = registry.createAlgorithmById(f"gisroads:{name}")
+    context = QgsProcessingContext()
+    feedback = feedback or QgsProcessingFeedback()
+    ok = algorithm.prepare(params, context, feedback)
+    assert ok
+    return algorithm.runPrepared(params, context, feedback)
+
+
+def test_cancel_before_start_writes_nothing(registry, tmp_path):
+    feedback = QgsProcessingFeedback()
+    feedback.cancel()
+    with pytest.raises(QgsProcessingException, match="cancelled"):
+        run(registry, "syntheticroadscene",
+            {"WIDTH": 300, "HEIGHT": 300, "DENSITY": 1, "PIXEL": 2.0,
+             "OUTPUT_FOLDER": str(tmp_path / "out")}, feedback)
+    assert not list((tmp_path / "out").glob("*"))
+
+
+def test_cancel_while_writing_the_cloud_leaves_no_partial_file(registry, tmp_path):
+    feedback = QgsProcessingFeedback()
+    feedback.progressChanged.connect(lambda percent: percent > 20 and feedback.cancel())
+    with pytest.raises(QgsProcessingException, match="cancelled"):
+        run(registry, "syntheticroadscene",
+            {"WIDTH": 400, "HEIGHT": 400, "DENSITY": 4, "PIXEL": 2.0,
+             "OUTPUT_FOLDER": str(tmp_path / "out")}, feedback)
+    # truth.gpkg is complete before the cloud starts; the cloud is absent, not partial
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["truth.gpkg"]
+
+
+def test_layer_to_frame_keeps_geometry_attributes_nulls_and_crs(qgis_app, tmp_path):
+    frame = gpd.GeoDataFrame(
+        {"road_id": [1, 2], "width_m": [7.5, None], "kind": ["road", "service"]},
+        geometry=[shapely.LineString([(0, 0), (10, 0)]), shapely.LineString([(0, 5), (3, 9)])],
+        crs="EPSG:32754")
+    frame.to_file(tmp_path / "l.gpkg", layer="lines")
+    layer = QgsVectorLayer(f"{tmp_path / 'l.gpkg'}|layername=lines", "lines", "ogr")
+    assert layer.isValid()
+    back = source_to_frame(layer)
+    assert back.crs.to_epsg() == 32754
+    assert back.road_id.tolist() == [1, 2] and back.kind.tolist() == ["road", "service"]
+    assert back.width_m.iloc[0] == 7.5 and back.width_m.isna().iloc[1]
+    assert all(a.equals(b) for a, b in zip(back.geometry, frame.geometry))
+
+
+def test_crs_round_trip(qgis_app):
+    assert to_pyproj(to_qgis("EPSG:2154")).to_epsg() == 2154
+    assert to_pyproj(to_qgis(None)) is None
