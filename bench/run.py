@@ -74,7 +74,7 @@ def case_synth_cloud(out: Path, size_m: float, density: float) -> dict:
     image = np.zeros((rows, cols))
     np.maximum.at(image, (r, c), sample.intensity.astype(float))
     from affine import Affine
-    truth = scene.truth.centrelines.cx[window[0]:window[2], window[1]:window[3]]
+    truth = scene.truth.centrelines.clip(window)
     write_quicklook(out / "synth_cloud.png",
                     [(truth, dict(color="red", linewidth=1, label="truth centre lines"))],
                     background=GeoRaster(image, Affine(cell, 0, window[0], 0, -cell, window[3]),
@@ -94,7 +94,7 @@ def case_evaluate(out: Path, size_m: float) -> dict:
     from gisroads.evaluate import apls_score, area_metrics, buffer_metrics, topology_metrics
     from gisroads.evaluate import match_layers
     from gisroads.geo import network_from_centrelines
-    from gisroads.io.quicklook import write_quicklook
+    from gisroads.io.quicklook import evaluation_layers, write_quicklook
     from gisroads.synthetic import make_scene
     from gisroads.synthetic.perturb import perturb_lines
 
@@ -120,13 +120,7 @@ def case_evaluate(out: Path, size_m: float) -> dict:
     _, baseline_s = _timed(bare_buffer)
     qa = match_layers(extracted, reference, buffer_m=3.0)
     write_quicklook(out / "evaluate.png", [
-        (truth.polygons, dict(color="khaki", alpha=0.5)),
-        (qa["eval_reference"][qa["eval_reference"].status == "FN"],
-         dict(color="red", linewidth=2.5, label="missed (FN)")),
-        (qa["eval_extracted"][qa["eval_extracted"].status == "TP"],
-         dict(color="green", linewidth=1, label="matched (TP)")),
-        (qa["eval_extracted"][qa["eval_extracted"].status == "FP"],
-         dict(color="magenta", linewidth=1.5, label="false (FP)")),
+        (truth.polygons, dict(color="khaki", alpha=0.5)), *evaluation_layers(qa),
     ], title=f"evaluation benchmark: {length_km:.1f} km of reference roads")
     return {"reference_km": length_km, **{f"{k}_s": v for k, v in times.items()},
             "baseline_bare_buffer_s": baseline_s,
@@ -161,7 +155,7 @@ def main() -> None:
         return
     plan = {"synth_cloud": {"size_m": 400.0 if args.quick else 1000.0,
                             "density": 4.0 if args.quick else 20.0},
-            "evaluate": {"size_m": 600.0 if args.quick else 1500.0}}
+            "evaluate": {"size_m": 600.0 if args.quick else 800.0}}
     results = {}
     for name, params in plan.items():
         print(f"running {name} {params} ...", flush=True)

@@ -11,7 +11,7 @@ import geopandas as gpd
 from .evaluate import evaluate_network, match_layers
 from .geo import CENTRELINES, POLYGONS, network_from_centrelines
 from .io.las import las_info
-from .io.quicklook import write_quicklook
+from .io.quicklook import evaluation_layers, write_quicklook
 from .io.raster import raster_info, read_raster, write_geotiff
 from .io.vector import list_layers, read_layer, write_geopackage
 from .progress import Progress, report, scaled, to_json
@@ -150,12 +150,7 @@ def demo_job(out_dir, *, seed: int = 0, progress: Progress = None) -> dict:
           for name in ("eval_extracted", "eval_reference")}
     write_quicklook(out / "quicklook.png", [
         (read_layer(paths["truth"], POLYGONS), dict(color="yellow", alpha=0.25)),
-        (qa["eval_reference"][qa["eval_reference"].status == "FN"],
-         dict(color="red", linewidth=3, label="missed reference (FN)")),
-        (qa["eval_extracted"][qa["eval_extracted"].status == "TP"],
-         dict(color="lime", linewidth=1.5, label="extracted, matched (TP)")),
-        (qa["eval_extracted"][qa["eval_extracted"].status == "FP"],
-         dict(color="magenta", linewidth=2, label="extracted, false (FP)")),
+        *evaluation_layers(qa),
         (read_layer(paths["truth"], "junctions"), dict(color="cyan", markersize=25,
                                                       label="truth junctions")),
     ], background=read_raster(paths["image"]),

@@ -61,3 +61,18 @@ def write_quicklook(path, layers, *, background: GeoRaster | None = None, title:
     finally:
         plt.close(fig)
     return Path(path)
+
+
+def evaluation_layers(qa: dict) -> list:
+    """The QA layers of :func:`gisroads.evaluate.match_layers` styled for
+    :func:`write_quicklook` in Boyko & Funkhouser's colours: missed reference red, matched
+    extraction green, false extraction magenta."""
+    reference, extracted = qa["eval_reference"], qa["eval_extracted"]
+    return [
+        (reference[reference.status == "FN"],
+         dict(color="red", linewidth=3, label="missed reference (FN)")),
+        (extracted[extracted.status == "TP"],
+         dict(color="lime", linewidth=1.5, label="extracted, matched (TP)")),
+        (extracted[extracted.status == "FP"],
+         dict(color="magenta", linewidth=2, label="extracted, false (FP)")),
+    ]

@@ -84,6 +84,24 @@ def test_every_version_and_point_format(tmp_path, version, point_format):
     assert (cloud.classification == 2).all()
 
 
+def test_las_1_0(tmp_path):
+    # laspy writes no 1.0 files; a 1.2 header with point format 1 has the 1.0 layout, so
+    # setting its minor version byte (offset 25) and zeroing the global-encoding field that
+    # 1.0 reserves (offset 6-7) gives a genuine LAS 1.0 file.
+    las = laspy.LasData(laspy.LasHeader(point_format=1, version="1.2"))
+    las.x, las.y, las.z = np.arange(5.0), np.arange(5.0) * 2, np.ones(5)
+    las.intensity = np.arange(5) + 100
+    las.write(tmp_path / "v12.las")
+    data = bytearray((tmp_path / "v12.las").read_bytes())
+    data[6:8] = b"\0\0"
+    data[25] = 0
+    (tmp_path / "v10.las").write_bytes(bytes(data))
+    assert las_info(tmp_path / "v10.las")["version"] == "1.0"
+    cloud = read_las(tmp_path / "v10.las")
+    np.testing.assert_allclose(cloud.xyz[:, 1], np.arange(5.0) * 2)
+    assert cloud.intensity.tolist() == [100, 101, 102, 103, 104]
+
+
 def test_file_without_intensity_reports_none(tmp_path):
     header = laspy.LasHeader(point_format=0, version="1.2")
     las = laspy.LasData(header)
