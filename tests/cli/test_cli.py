@@ -1,12 +1,13 @@
 """The gisroads command as a user runs it: a subprocess, exit codes, stdout/stderr, files."""
 import json
+import sqlite3
 import subprocess
 import sys
 
 import pytest
 import shapely
 
-from gisroads.io.vector import read_layer, write_geopackage
+from gisroads.io.vector import list_layers, read_layer, write_geopackage
 
 
 def gisroads(*args, cwd=None):
@@ -83,6 +84,10 @@ def test_synth_writes_scene_and_truth(tmp_path):
     assert set(paths) == {"truth", "cloud", "image", "dsm"}
     info = json.loads(gisroads("info", paths["cloud"], "--json").stdout)
     assert 0.9 * 90_000 < info["point_count"] < 1.1 * 90_000
+    con = sqlite3.connect(paths["truth"])
+    styled = {row[0] for row in con.execute("SELECT f_table_name FROM layer_styles")}
+    con.close()
+    assert styled == set(list_layers(paths["truth"])) and len(styled) == 13
 
 
 def test_bad_option_values_are_refused():

@@ -77,8 +77,9 @@ def test_geopackage_opens_with_every_layer_styled(qgis_process, scene_dir):
     truth = scene_dir / "truth.gpkg"
     styles = json.loads(qgis_process.run("openroadnetwork", INPUT=truth)["STYLES"])
     assert set(styles) == set(list_layers(truth))
-    for name in ("road_centrelines", "road_polygons", "junctions"):
-        assert styles[name]["styled_from_file"], name
+    assert len(styles) == 13  # contract layers and the scene's objects
+    for name, style in styles.items():
+        assert style["styled_from_file"], name
     # the colours of styles/*.qml, not QGIS's random default colours
     assert styles["road_centrelines"]["colors"] == ["#e31a1c"]
     assert styles["road_polygons"]["colors"] == ["#ffd250"]
