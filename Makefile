@@ -5,6 +5,8 @@ VENV := .venv/bin
 QVENV := .venv-qgis/bin
 QGIS_PROCESS := /usr/bin/qgis_process.bin
 export QT_QPA_PLATFORM := offscreen
+# 2 cores: OpenBLAS threads thrash under load (an NCut went from 4 s to 29 s)
+export OPENBLAS_NUM_THREADS := 1
 
 .PHONY: demo test test-core test-core-qgis test-qgis plugin bench setup setup-core
 
