@@ -13,6 +13,15 @@ evaluate
     The evaluator on a road network of >= 10 km against a degraded copy. Baseline: one
     shapely union + buffer + intersection of the same lines (the bare geometry of a buffer
     metric).
+ground_planes
+    Multi-level ground planes on a synthetic cloud of 21 M points. Baseline: building a
+    k-d tree over the same points.
+lidar_tile
+    The LiDAR pipeline on one 500 m x 500 m tile at 0.5 m, scored against the scene's truth,
+    beside the naive dark-lowest-point baseline (time and scores).
+lidar_real
+    Every LAS/LAZ file of ../shared/data/lidar through the pipeline and the baseline; where
+    there is ground truth, completeness and correctness at a 3 m buffer.
 """
 from __future__ import annotations
 
@@ -127,7 +136,84 @@ def case_evaluate(out: Path, size_m: float) -> dict:
             "ratio_buffer_to_bare": times["buffer"] / baseline_s}
 
 
-CASES = {"synth_cloud": case_synth_cloud, "evaluate": case_evaluate}
+def case_ground_planes(out: Path, size_m: float, density: float) -> dict:
+    from gisroads.io.las import concatenate
+    from gisroads.lidar.ground import ground_planes
+    from gisroads.synthetic import make_scene, render_cloud
+
+    scene = make_scene(seed=0, size_m=(size_m, size_m))
+    cloud = concatenate(list(render_cloud(scene, density_per_m2=density, seed=0)))
+    planes, seconds = _timed(ground_planes, cloud.xyz)
+    # baseline: one k-d tree build over the same points, the first step of any
+    # neighbourhood-graph segmentation
+    from scipy.spatial import cKDTree
+    _, baseline_s = _timed(cKDTree, cloud.xyz)
+    return {"points": len(cloud), "ground_planes_s": seconds,
+            "points_per_s": len(cloud) / seconds, "levels": int(planes.n_levels),
+            "ground_share": float((planes.level >= 0).mean()),
+            "baseline_kdtree_s": baseline_s, "ratio_to_kdtree": seconds / baseline_s}
+
+
+def case_lidar_tile(out: Path, size_m: float, density: float) -> dict:
+    from gisroads.evaluate import buffer_metrics
+    from gisroads.io.las import concatenate
+    from gisroads.lidar.baseline import baseline_roads
+    from gisroads.lidar.pipeline import extract_tile
+    from gisroads.lidar.tiles import Tile
+    from gisroads.synthetic import make_scene, render_cloud
+
+    scene = make_scene(seed=0, size_m=(size_m, size_m))
+    cloud = concatenate(list(render_cloud(scene, density_per_m2=density, seed=0)))
+    bounds = tuple(float(v) for v in scene.extent)
+    tile = Tile(0, 0, bounds, bounds)
+    roads, seconds = _timed(extract_tile, cloud, tile, cell_m=0.5)
+    baseline, baseline_s = _timed(baseline_roads, cloud)
+    truth = scene.truth.centrelines
+    method = buffer_metrics(roads.centrelines, truth, buffer_m=3.0)
+    naive = buffer_metrics(baseline.centrelines, truth, buffer_m=3.0)
+    return {"tile_m": size_m, "points": len(cloud), "tile_s": seconds,
+            "baseline_s": baseline_s, "ratio_to_baseline": seconds / baseline_s,
+            "completeness": method.completeness, "correctness": method.correctness,
+            "baseline_completeness": naive.completeness,
+            "baseline_correctness": naive.correctness}
+
+
+def case_lidar_real(out: Path, data_dir: str) -> dict:
+    """Every real LAS/LAZ file through the pipeline and the naive baseline."""
+    from gisroads.evaluate import buffer_metrics
+    from gisroads.io.las import read_las
+    from gisroads.io.vector import read_layer
+    from gisroads.lidar.baseline import baseline_roads
+    from gisroads.lidar.pipeline import auto_cell_m, extract_roads
+
+    results = {}
+    data = Path(data_dir)
+    for path in sorted(data.glob("*.laz")):
+        roads, seconds = _timed(extract_roads, path)
+        cloud = read_las(path)
+        baseline, baseline_s = _timed(baseline_roads, cloud)
+        extent = cloud.xyz[:, :2].max(0) - cloud.xyz[:, :2].min(0)
+        entry = {"points": len(cloud), "cell_m": auto_cell_m(len(cloud), extent.prod()),
+                 "seconds": seconds, "baseline_seconds": baseline_s,
+                 "roads_km": float(roads.network.centrelines.length.sum() / 1000),
+                 "baseline_roads_km": float(baseline.centrelines.length.sum() / 1000)}
+        truth_dir = data / "ground_truth" / path.stem.replace("_LA93_IGN69", "")
+        truth = truth_dir / "centrelines.geojson"
+        if truth.exists() and len(read_layer(truth)):
+            reference = read_layer(truth)
+            for name, network in (("method", roads.network), ("baseline", baseline)):
+                lines = network.centrelines.to_crs(reference.crs)
+                if len(lines):
+                    scores = buffer_metrics(lines, reference, buffer_m=3.0)
+                    entry[f"{name}_completeness"] = scores.completeness
+                    entry[f"{name}_correctness"] = scores.correctness
+        results[path.stem] = entry
+    return results
+
+
+CASES = {"synth_cloud": case_synth_cloud, "evaluate": case_evaluate,
+         "ground_planes": case_ground_planes, "lidar_tile": case_lidar_tile,
+         "lidar_real": case_lidar_real}
 
 
 def run_case(name: str, out: Path, params: dict) -> dict:
@@ -155,7 +241,12 @@ def main() -> None:
         return
     plan = {"synth_cloud": {"size_m": 400.0 if args.quick else 1000.0,
                             "density": 4.0 if args.quick else 20.0},
-            "evaluate": {"size_m": 600.0 if args.quick else 800.0}}
+            "evaluate": {"size_m": 600.0 if args.quick else 800.0},
+            "ground_planes": {"size_m": 400.0 if args.quick else 1000.0,
+                              "density": 4.0 if args.quick else 21.0},
+            "lidar_tile": {"size_m": 300.0 if args.quick else 500.0, "density": 10.0},
+            "lidar_real": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"
+                                           / "data" / "lidar")}}
     results = {}
     for name, params in plan.items():
         print(f"running {name} {params} ...", flush=True)

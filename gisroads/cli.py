@@ -103,6 +103,31 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+def _floats(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of metres")
+    if not values or min(values) <= 0:
+        raise argparse.ArgumentTypeError("values must be positive metres")
+    return values
+
+
+def cmd_lidar(args) -> int:
+    from .jobs import lidar_job
+    options = dict(cell_m=args.cell, tile_m=args.tile, overlap_m=args.overlap,
+                   n_segments=args.segments)
+    if args.widths:
+        options["widths_m"] = args.widths
+    if args.lengths:
+        options["lengths_m"] = args.lengths
+    result = lidar_job(args.input, args.out, tagged_las=args.tagged_las,
+                       rasters_dir=args.rasters, quicklook=args.quicklook,
+                       progress=_ProgressBar(not args.json), **options)
+    _print(result, args.json, "\n".join(f"{k}: {v}" for k, v in result.items()))
+    return 0
+
+
 def cmd_demo(args) -> int:
     from .evaluate import format_report
     from .jobs import demo_job
@@ -170,6 +195,33 @@ def build_parser() -> argparse.ArgumentParser:
                    help="polygon file: score only inside it (e.g. the surveyed area)")
     p.add_argument("--qa", type=Path,
                    help="write matched/missed/false pieces to this GeoPackage")
+
+    p = add("lidar", cmd_lidar, "extract roads from a LAS/LAZ point cloud (Zhu & Mordohai)",
+            "Extract the road network of an airborne LiDAR point cloud: ground planes on "
+            "several levels, a 0.5 m intensity image per level, edges and a normalized-cut "
+            "segmentation, rectangle road hypotheses scored by boundary and interior "
+            "filters, per-width likelihood maps and a minimum cover of the hypotheses. "
+            "Writes road centre lines with widths, road polygons, junctions and the QA "
+            "layers rectangles and hypotheses to a GeoPackage in the cloud's CRS.")
+    p.add_argument("input", type=Path, help="LAS/LAZ point cloud with intensity")
+    p.add_argument("-o", "--out", type=Path, required=True, help="output GeoPackage (.gpkg)")
+    p.add_argument("--cell", type=_positive,
+                   help="intensity image cell in metres (default: 0.5, or the mean point "
+                        "spacing of a sparser cloud)")
+    p.add_argument("--widths", type=_floats,
+                   help="road widths to try, metres, e.g. 6,9,12,16,20,25 (the default)")
+    p.add_argument("--lengths", type=_floats,
+                   help="rectangle lengths to try, metres (default 40,80,150,300)")
+    p.add_argument("--tile", type=_positive, default=300.0, help="tile side, metres (300)")
+    p.add_argument("--overlap", type=float, default=100.0,
+                   help="overlap with each neighbouring tile, metres (100)")
+    p.add_argument("--segments", type=int, default=150,
+                   help="number of NCut segments per tile image (default 150)")
+    p.add_argument("--tagged-las", type=Path,
+                   help="also write the cloud with road points classified 11")
+    p.add_argument("--rasters", type=Path,
+                   help="also write intensity, likelihood and ground-height GeoTIFFs here")
+    p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
 
     p = add("demo", cmd_demo, "run the demo on a synthetic scene",
             "Write a synthetic scene and its truth, degrade the truth into a stand-in "

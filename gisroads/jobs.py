@@ -9,7 +9,7 @@ from pathlib import Path
 import geopandas as gpd
 
 from .evaluate import evaluate_network, match_layers
-from .geo import CENTRELINES, POLYGONS, network_from_centrelines
+from .geo import CENTRELINES, POLYGONS, GeoRaster, network_from_centrelines
 from .io.las import las_info
 from .io.quicklook import evaluation_layers, write_quicklook
 from .io.raster import raster_info, read_raster, write_geotiff
@@ -125,6 +125,77 @@ def evaluate_job(extracted, reference, *, buffer_m: float = 3.0, cell_m: float =
                                                buffer_m=buffer_m, valid_area=valid))
     report(progress, 1.0, "done")
     return results
+
+
+def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
+              quicklook=None, progress: Progress = None, **options) -> dict:
+    """Zhu & Mordohai's road extraction of a LAS/LAZ file into a road-network GeoPackage.
+
+    Writes ``out_path`` (road_centrelines, road_polygons, junctions, and the QA layers
+    rectangles and hypotheses) in the cloud's CRS; optionally ``tagged_las`` (the cloud with
+    road points in class 11), ``rasters_dir`` (per-level intensity and likelihood GeoTIFFs
+    of every tile, and the per-level ground heights) and a ``quicklook`` PNG.
+    ``options`` go to :func:`gisroads.lidar.pipeline.extract_roads`.
+
+    Returns
+    -------
+    dict
+        Output paths and counts.
+    """
+    from .lidar.pipeline import extract_roads
+    from .lidar.tagging import tag_road_points
+
+    roads = extract_roads(cloud_path, progress=scaled(progress, 0.0, 0.85), **options)
+    network = roads.network
+    if len(network.centrelines) == 0:
+        raise ValueError(f"{cloud_path}: no road found")
+    write_geopackage(out_path, network.layers())
+    result = {"gpkg": Path(out_path), "roads": len(network.centrelines),
+              "length_m": float(network.centrelines.length_m.sum()),
+              "junctions": len(network.junctions), "tiles": len(roads.tiles)}
+    if rasters_dir is not None:
+        report(progress, 0.86, "writing rasters")
+        rasters = Path(rasters_dir)
+        rasters.mkdir(parents=True, exist_ok=True)
+        for tile in roads.tiles:
+            name = f"tile_r{tile.tile.row}_c{tile.tile.col}"
+            levels = [f"level_{k}" for k in range(tile.intensity.data.shape[0])]
+            write_geotiff(rasters / f"{name}_intensity.tif", tile.intensity, band_names=levels)
+            for k, maps in enumerate(tile.likelihood):
+                write_geotiff(rasters / f"{name}_likelihood_level_{k}.tif", maps,
+                              band_names=[f"width_{w:g}_m" for w in options.get(
+                                  "widths_m", _default_widths())])
+        write_geotiff(rasters / "ground_heights.tif", roads.heights,
+                      band_names=[f"level_{k}" for k in range(roads.heights.data.shape[0])])
+        result["rasters"] = rasters
+    if tagged_las is not None:
+        report(progress, 0.9, "tagging road points")
+        working = roads.tiles[0].centrelines.crs
+        result["tagged_points"] = tag_road_points(cloud_path, tagged_las,
+                                                  network.polygons.to_crs(working),
+                                                  roads.heights)
+        result["tagged_las"] = Path(tagged_las)
+    if quicklook is not None:
+        report(progress, 0.97, "drawing the quick-look")
+        tile = max(roads.tiles, key=lambda t: len(t.rectangles))
+        write_quicklook(quicklook, [
+            (network.qa["rectangles"].to_crs(tile.intensity.crs),
+             dict(facecolor="none", edgecolor="cyan", linewidth=0.6)),
+            (network.centrelines.to_crs(tile.intensity.crs),
+             dict(color="red", linewidth=1.5, label="road centre lines")),
+            (network.junctions.to_crs(tile.intensity.crs),
+             dict(color="yellow", markersize=20, label="junctions")),
+        ], background=GeoRaster(tile.intensity.data[0], tile.intensity.transform,
+                                tile.intensity.crs),
+            title=f"{Path(cloud_path).name}: roads over the level-0 intensity image")
+        result["quicklook"] = Path(quicklook)
+    report(progress, 1.0, "done")
+    return result
+
+
+def _default_widths():
+    from .lidar.pipeline import DEFAULT_WIDTHS_M
+    return DEFAULT_WIDTHS_M
 
 
 def demo_job(out_dir, *, seed: int = 0, progress: Progress = None) -> dict:

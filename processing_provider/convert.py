@@ -140,6 +140,18 @@ def style_on_load(context, dest_id: str, layer_name: str) -> None:
         context.layerToLoadOnCompletionDetails(dest_id).setPostProcessor(processor)
 
 
+def load_geopackage_on_completion(context, path: str, layer_names, *, group: str = "") -> None:
+    """Add layers of a GeoPackage to the project when the algorithm ends, each styled with
+    ``styles/<layer>.qml`` (Processing loads layers without their stored default style)."""
+    from qgis.core import QgsProcessingContext
+    for name in layer_names:
+        uri = f"{path}|layername={name}"
+        context.addLayerToLoadOnCompletion(
+            uri, QgsProcessingContext.LayerDetails(f"{group} {name}".strip(),
+                                                   context.project(), name))
+        style_on_load(context, uri, name)
+
+
 def open_geopackage_layers(path: str) -> list[tuple[str, QgsVectorLayer, bool]]:
     """Each layer of a GeoPackage as the QGIS desktop opens it: with the default style
     stored in the file. Returns ``(name, layer, styled_from_file)`` per layer."""

@@ -2,6 +2,7 @@
 from qgis.core import QgsProcessingProvider
 
 from .algorithms.evaluate_network import EvaluateRoadNetwork
+from .algorithms.lidar_roads import LidarRoadNetwork
 from .algorithms.open_network import OpenRoadNetwork
 from .algorithms.synthetic_scene import SyntheticRoadScene
 
@@ -18,5 +19,6 @@ class GisroadsProvider(QgsProcessingProvider):
         return f"gisroads {gisroads.__version__}: road networks from LiDAR and imagery"
 
     def loadAlgorithms(self):  # noqa: N802
-        for algorithm in (EvaluateRoadNetwork(), SyntheticRoadScene(), OpenRoadNetwork()):
+        for algorithm in (EvaluateRoadNetwork(), SyntheticRoadScene(), OpenRoadNetwork(),
+                          LidarRoadNetwork()):
             self.addAlgorithm(algorithm)

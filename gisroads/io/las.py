@@ -248,6 +248,13 @@ def read_las(path, *, bbox=None, chunk_size: int = DEFAULT_CHUNK) -> PointCloud:
     return cloud
 
 
+def cloud_crs(path) -> tuple[CRS | None, CRS | None]:
+    """``(working CRS in metres, the file's own CRS)`` of a LAS/LAZ file, from its header."""
+    with _open(path) as reader:
+        source = las_crs(reader.header)
+        return metre_crs(source, las_units(reader.header, source)), source
+
+
 def las_info(path) -> dict:
     """What a GIS user asks of a LAS/LAZ file first, from its header (no point decoded).
 

@@ -7,7 +7,7 @@ from qgis.core import (QgsProcessingOutputFile, QgsProcessingOutputRasterLayer,
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import synth_job
 
-from ..convert import gisroads_errors, progress_callback
+from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
 from .base import GisroadsAlgorithm
 
 
@@ -76,11 +76,8 @@ class SyntheticRoadScene(GisroadsAlgorithm):
                 image=self.parameterAsBool(parameters, "WRITE_IMAGE", context),
                 progress=progress_callback(feedback))
         truth = str(paths["truth"])
-        for layer in (POLYGONS, CENTRELINES, JUNCTIONS):
-            # loaded from the GeoPackage, whose stored default styles QGIS applies
-            context.addLayerToLoadOnCompletion(
-                f"{truth}|layername={layer}",
-                QgsProcessingContext.LayerDetails(f"truth {layer}", context.project(), layer))
+        load_geopackage_on_completion(context, truth, (POLYGONS, CENTRELINES, JUNCTIONS),
+                                      group="truth")
         outputs = {"TRUTH": truth, "TRUTH_CENTRELINES": f"{truth}|layername={CENTRELINES}",
                    "CLOUD": str(paths.get("cloud", "")), "OUTPUT_FOLDER": folder}
         for key in ("IMAGE", "DSM"):

@@ -93,3 +93,21 @@ def test_synth_writes_scene_and_truth(tmp_path):
 def test_bad_option_values_are_refused():
     result = gisroads("synth", "-o", "x", "--size", "10x10")
     assert result.returncode == 2 and "at least 100" in result.stderr
+
+
+def test_lidar_writes_network_tagged_cloud_and_quicklook(tmp_path):
+    from gisroads.io.las import read_las
+    from gisroads.synthetic import make_scene, write_cloud
+    write_cloud(make_scene(seed=2, size_m=(300.0, 300.0)), tmp_path / "c.laz",
+                density_per_m2=3.0)
+    result = gisroads("lidar", tmp_path / "c.laz", "-o", tmp_path / "roads.gpkg",
+                      "--tagged-las", tmp_path / "tagged.laz", "--quicklook",
+                      tmp_path / "roads.png", "--lengths", "40,80,150", "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["roads"] > 0 and summary["tagged_points"] > 1000
+    assert list_layers(tmp_path / "roads.gpkg") == [
+        "road_centrelines", "road_polygons", "junctions", "rectangles", "hypotheses"]
+    tagged = read_las(tmp_path / "tagged.laz")
+    assert (tagged.classification == 11).sum() == summary["tagged_points"]
+    assert (tmp_path / "roads.png").stat().st_size > 10_000

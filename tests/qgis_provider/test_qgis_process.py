@@ -9,7 +9,8 @@ import shapely
 from gisroads.io.las import read_las
 from gisroads.io.vector import list_layers, read_layer, write_geopackage
 
-ALGORITHMS = ["evaluateroadnetwork", "syntheticroadscene", "openroadnetwork"]
+ALGORITHMS = ["evaluateroadnetwork", "syntheticroadscene", "openroadnetwork",
+              "lidarroadnetwork"]
 
 
 def test_provider_lists_every_algorithm(qgis_process):
@@ -84,3 +85,22 @@ def test_geopackage_opens_with_every_layer_styled(qgis_process, scene_dir):
     assert styles["road_centrelines"]["colors"] == ["#e31a1c"]
     assert styles["road_polygons"]["colors"] == ["#ffd250"]
     assert styles["junctions"]["colors"] == ["#1f78b4"]
+
+
+def test_lidar_road_network(qgis_process, scene_dir, tmp_path):
+    result = qgis_process.run("lidarroadnetwork", INPUT=scene_dir / "cloud.laz",
+                              LENGTHS="40,80,150", OUTPUT=tmp_path / "roads.gpkg",
+                              TAGGED_LAS=tmp_path / "tagged.laz")
+    assert result["ROADS"] > 0 and result["LENGTH_M"] > 100
+    assert list_layers(tmp_path / "roads.gpkg")[:3] == ["road_centrelines", "road_polygons",
+                                                        "junctions"]
+    assert (read_las(tmp_path / "tagged.laz").classification == 11).any()
+
+
+def test_lidar_bad_input_fails_cleanly(qgis_process, tmp_path):
+    (tmp_path / "bad.laz").write_bytes(b"LASF" + bytes(300))
+    result = qgis_process("run", "gisroads:lidarroadnetwork", "--",
+                          f"INPUT={tmp_path / 'bad.laz'}", f"OUTPUT={tmp_path / 'r.gpkg'}",
+                          check=False)
+    assert result.returncode == 1 and "bad.laz" in result.stdout + result.stderr
+    assert not (tmp_path / "r.gpkg").exists()
