@@ -45,10 +45,12 @@ T_INT = 0.0
 """Least interior strength: a road's parallel edge energy (markings, its own kerbs) must at
 least balance the oblique energy, which noise and clutter (a share 2/3 of random
 orientations) make negative."""
-L_MAX = 50.0
+L_MAX = 25.0
 """Cap of the likelihood maps, Eq. (5). With the default sampling a pixel on a straight
-road sums hundreds of votes of 0.2-0.5 at its width, one on a parking lot or a short
-road-like patch 5-27: 50 saturates roads and leaves lots below it."""
+synthetic road sums hundreds of votes of 0.2-0.5 at its width, one on a parking lot or a
+short road-like patch 5-27; on fusa only about half the road pixels reach 25. A sweep of
+the cap (15, 25, 50) with the cover's d_max (0.5, 0.7, 0.85) scored best at 25 with 0.7 on
+both fusa and a synthetic scene (see the minimum-cover module)."""
 BAND_M = 4.0
 """Band width w1 of the boundary filter, Eq. (1), metres: wide enough to reach past a
 kerb-side strip of parked cars, tree shadow or sidewalk to the bright verge."""

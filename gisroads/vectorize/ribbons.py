@@ -48,7 +48,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..evaluate.topology import line_graph
-from ..geo import POLYGONS, RoadNetwork, _empty_layer, network_from_centrelines
+from ..geo import RoadNetwork, network_from_centrelines
 
 #: Defaults of the shared steps (the papers give none): ends within 5 m, about half a
 #: two-lane road, continue each other; 20 degrees separates continuing pieces from branches
@@ -208,11 +208,11 @@ def _head_to_tail(x, y) -> np.ndarray:
     x_from = float(shapely.line_locate_point(x, shapely.get_point(y, 0)))
     y_to = float(shapely.line_locate_point(y, shapely.get_point(x, -1)))
     x_part, y_part = _clean(_cut(x_xy, x_from, x_length)), _clean(_cut(y_xy, 0.0, y_to))
-    crossings = (shapely.get_coordinates(shapely.intersection(
-        shapely.linestrings(x_part), shapely.linestrings(y_part)))
-        if len(x_part) > 1 and len(y_part) > 1 else [])
-    if len(crossings):
-        crossing = shapely.points(crossings)
+    x_part = shapely.linestrings(x_part) if len(x_part) > 1 else None
+    y_part = shapely.linestrings(y_part) if len(y_part) > 1 else None
+    # intersects() first: GEOS 3.11 flags the NaN z of an empty intersection as invalid
+    if x_part is not None and y_part is not None and shapely.intersects(x_part, y_part):
+        crossing = shapely.points(shapely.get_coordinates(shapely.intersection(x_part, y_part)))
         first = int(np.argmin(shapely.line_locate_point(x, crossing)))
         switch_x = float(shapely.line_locate_point(x, crossing[first]))
         switch_y = float(shapely.line_locate_point(y, crossing[first]))
@@ -265,9 +265,10 @@ def _continuation_pairs(lines, widths_m, join_gap_m: float, angle_tol_deg: float
     i, j = i[keep], j[keep]
     tolerance = _near_m(widths_m[i], widths_m[j], join_gap_m)
     starts, ends = shapely.get_point(lines, 0), shapely.get_point(lines, -1)
-    near = lambda points, others: shapely.distance(points, others) <= tolerance
-    i_start, i_end = near(starts[i], lines[j]), near(ends[i], lines[j])
-    j_start, j_end = near(starts[j], lines[i]), near(ends[j], lines[i])
+    i_start = shapely.distance(starts[i], lines[j]) <= tolerance
+    i_end = shapely.distance(ends[i], lines[j]) <= tolerance
+    j_start = shapely.distance(starts[j], lines[i]) <= tolerance
+    j_end = shapely.distance(ends[j], lines[i]) <= tolerance
     i_shorter = shapely.length(lines[i]) <= shapely.length(lines[j])
     shorter, longer = np.where(i_shorter, lines[i], lines[j]), np.where(i_shorter, lines[j],
                                                                          lines[i])
@@ -492,7 +493,7 @@ def _pieces_to_network(lines, widths_m, scores, areas, crs, *, method: str, join
         crs=crs).explode(index_parts=False)
     polygons = polygons[polygons.geom_type == "Polygon"].reset_index(drop=True)
     polygons["area_m2"] = shapely.area(polygons.geometry.values)
-    network.polygons = polygons if len(polygons) else _empty_layer(POLYGONS, crs)
+    network.polygons = polygons
     return network
 
 
