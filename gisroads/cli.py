@@ -103,14 +103,12 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
-def _floats(text: str) -> tuple[float, ...]:
+def _metres(text: str) -> tuple[float, ...]:
+    from .jobs import parse_metres
     try:
-        values = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of metres")
-    if not values or min(values) <= 0:
-        raise argparse.ArgumentTypeError("values must be positive metres")
-    return values
+        return parse_metres(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def cmd_lidar(args) -> int:
@@ -208,9 +206,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cell", type=_positive,
                    help="intensity image cell in metres (default: 0.5, or the mean point "
                         "spacing of a sparser cloud)")
-    p.add_argument("--widths", type=_floats,
+    p.add_argument("--widths", type=_metres,
                    help="road widths to try, metres, e.g. 6,9,12,16,20,25 (the default)")
-    p.add_argument("--lengths", type=_floats,
+    p.add_argument("--lengths", type=_metres,
                    help="rectangle lengths to try, metres (default 40,80,150,300)")
     p.add_argument("--tile", type=_positive, default=300.0, help="tile side, metres (300)")
     p.add_argument("--overlap", type=float, default=100.0,

@@ -21,6 +21,17 @@ from .synthetic.perturb import perturb_lines
 VECTOR_SUFFIXES = {".gpkg", ".geojson", ".json", ".shp", ".fgb", ".kml", ".gml"}
 
 
+def parse_metres(text: str, name: str = "value") -> tuple[float, ...]:
+    """Positive metres from a comma- (or semicolon-) separated list, e.g. ``"6,9,12"``."""
+    try:
+        values = tuple(float(v) for v in text.replace(";", ",").split(",") if v.strip())
+    except ValueError:
+        raise ValueError(f"{name}: {text!r} is not a comma-separated list of metres") from None
+    if not values or min(values) <= 0:
+        raise ValueError(f"{name}: give positive metres, e.g. 6,9,12")
+    return values
+
+
 def describe_file(path) -> dict:
     """Header facts of a LAS/LAZ, raster or vector file (see ``gisroads info``)."""
     path = Path(path)

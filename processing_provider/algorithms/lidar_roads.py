@@ -5,21 +5,11 @@ from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFile,
                        QgsProcessingParameterString)
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
-from gisroads.jobs import lidar_job
+from gisroads.jobs import lidar_job, parse_metres
 from gisroads.lidar.pipeline import DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M
 
 from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
 from .base import GisroadsAlgorithm
-
-
-def _metres_list(text: str, name: str):
-    try:
-        values = tuple(float(v) for v in text.replace(";", ",").split(",") if v.strip())
-    except ValueError:
-        raise ValueError(f"{name}: {text!r} is not a comma-separated list of metres") from None
-    if not values or min(values) <= 0:
-        raise ValueError(f"{name}: give positive metres, e.g. 6,9,12")
-    return values
 
 
 class LidarRoadNetwork(GisroadsAlgorithm):
@@ -94,9 +84,9 @@ class LidarRoadNetwork(GisroadsAlgorithm):
                 rasters_dir=rasters, progress=progress_callback(feedback),
                 cell_m=(self.parameterAsDouble(parameters, "CELL", context)
                         if parameters.get("CELL") not in (None, "") else None),
-                widths_m=_metres_list(self.parameterAsString(parameters, "WIDTHS", context),
+                widths_m=parse_metres(self.parameterAsString(parameters, "WIDTHS", context),
                                       "widths"),
-                lengths_m=_metres_list(self.parameterAsString(parameters, "LENGTHS", context),
+                lengths_m=parse_metres(self.parameterAsString(parameters, "LENGTHS", context),
                                        "lengths"),
                 tile_m=self.parameterAsDouble(parameters, "TILE", context),
                 overlap_m=self.parameterAsDouble(parameters, "OVERLAP", context),
