@@ -204,6 +204,29 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
     return result
 
 
+def tag_job(cloud_path, polygons_path, heights_path, out_path, *,
+            tolerance_m: float = 0.3) -> dict:
+    """Classify the road points of a cloud (class 11) from road polygons with a ``level``
+    column and the per-level ground-height GeoTIFF of the LiDAR pipeline's rasters.
+
+    Polygons in any CRS are reprojected to the cloud's; the heights raster must be in the
+    cloud's (metre) working CRS, as the pipeline writes it.
+    """
+    from .io.las import cloud_crs
+    from .lidar.tagging import tag_road_points
+
+    working, _ = cloud_crs(cloud_path)
+    polygons = read_layer(polygons_path, POLYGONS if str(polygons_path).endswith(".gpkg")
+                          and POLYGONS in list_layers(polygons_path) else None)
+    if len(polygons) == 0:
+        raise ValueError(f"{polygons_path}: no road polygon")
+    if working is not None and polygons.crs is not None:
+        polygons = polygons.to_crs(working)
+    heights = read_raster(heights_path)
+    tagged = tag_road_points(cloud_path, out_path, polygons, heights, tolerance_m=tolerance_m)
+    return {"tagged_las": Path(out_path), "tagged_points": tagged}
+
+
 def _default_widths():
     from .lidar.pipeline import DEFAULT_WIDTHS_M
     return DEFAULT_WIDTHS_M

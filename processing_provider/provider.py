@@ -5,6 +5,7 @@ from .algorithms.evaluate_network import EvaluateRoadNetwork
 from .algorithms.lidar_roads import LidarRoadNetwork
 from .algorithms.open_network import OpenRoadNetwork
 from .algorithms.synthetic_scene import SyntheticRoadScene
+from .algorithms.tag_points import TagRoadPoints
 
 
 class GisroadsProvider(QgsProcessingProvider):
@@ -20,5 +21,5 @@ class GisroadsProvider(QgsProcessingProvider):
 
     def loadAlgorithms(self):  # noqa: N802
         for algorithm in (EvaluateRoadNetwork(), SyntheticRoadScene(), OpenRoadNetwork(),
-                          LidarRoadNetwork()):
+                          LidarRoadNetwork(), TagRoadPoints()):
             self.addAlgorithm(algorithm)

@@ -10,7 +10,7 @@ from gisroads.io.las import read_las
 from gisroads.io.vector import list_layers, read_layer, write_geopackage
 
 ALGORITHMS = ["evaluateroadnetwork", "syntheticroadscene", "openroadnetwork",
-              "lidarroadnetwork"]
+              "lidarroadnetwork", "tagroadpoints"]
 
 
 def test_provider_lists_every_algorithm(qgis_process):
@@ -87,14 +87,22 @@ def test_geopackage_opens_with_every_layer_styled(qgis_process, scene_dir):
     assert styles["junctions"]["colors"] == ["#1f78b4"]
 
 
-def test_lidar_road_network(qgis_process, scene_dir, tmp_path):
+def test_lidar_road_network_then_tag_road_points(qgis_process, scene_dir, tmp_path):
     result = qgis_process.run("lidarroadnetwork", INPUT=scene_dir / "cloud.laz",
                               LENGTHS="40,80,150", OUTPUT=tmp_path / "roads.gpkg",
-                              TAGGED_LAS=tmp_path / "tagged.laz")
+                              TAGGED_LAS=tmp_path / "tagged.laz", RASTERS=tmp_path / "rasters")
     assert result["ROADS"] > 0 and result["LENGTH_M"] > 100
     assert list_layers(tmp_path / "roads.gpkg")[:3] == ["road_centrelines", "road_polygons",
                                                         "junctions"]
-    assert (read_las(tmp_path / "tagged.laz").classification == 11).any()
+    in_pipeline = read_las(tmp_path / "tagged.laz").classification == 11
+    assert in_pipeline.sum() > 1000
+    # the same tagging as a stage of its own, from the pipeline's outputs
+    tagged = qgis_process.run("tagroadpoints", INPUT=scene_dir / "cloud.laz",
+                              POLYGONS=tmp_path / "roads.gpkg",
+                              HEIGHTS=tmp_path / "rasters" / "ground_heights.tif",
+                              OUTPUT=tmp_path / "tagged_again.laz")
+    again = read_las(tmp_path / "tagged_again.laz").classification == 11
+    assert tagged["TAGGED"] == again.sum() == in_pipeline.sum()
 
 
 def test_lidar_bad_input_fails_cleanly(qgis_process, tmp_path):

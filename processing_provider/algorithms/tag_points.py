@@ -1,0 +1,60 @@
+"""Tag road points: classify the road-surface points of a cloud (class 11), level by level."""
+from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFile,
+                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber)
+
+from gisroads.jobs import tag_job
+
+from ..convert import gisroads_errors
+from .base import GisroadsAlgorithm
+
+
+class TagRoadPoints(GisroadsAlgorithm):
+    NAME = "tagroadpoints"
+    DISPLAY_NAME = "Tag road points"
+    GROUP = "LiDAR"
+    HELP = (
+        "<p>Writes a copy of a LAS/LAZ point cloud whose road-surface points are classified "
+        "11 (road surface), every other attribute unchanged.</p>"
+        "<p>A point is road when it lies inside a road polygon and within a height "
+        "tolerance of the ground surface of that polygon's level: on a bridge, the deck "
+        "points belong to the deck road and the points of the road below to that road, "
+        "never each other. The road polygons come from a gisroads road network (their "
+        "<i>level</i> field; level 0 where it is missing) and the level surfaces from the "
+        "ground_heights.tif the LiDAR road network algorithm writes into its raster "
+        "folder.</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        params = [
+            (QgsProcessingParameterFile("INPUT", self.tr("Point cloud (LAS/LAZ)"),
+                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)"),
+             "the cloud the road network was extracted from"),
+            (QgsProcessingParameterFile("POLYGONS", self.tr("Road polygons"),
+                                        fileFilter="Vector (*.gpkg *.geojson *.shp)"),
+             "a gisroads GeoPackage (its road_polygons layer) or any polygon file with "
+             "a level field"),
+            (QgsProcessingParameterFile("HEIGHTS", self.tr("Ground heights per level"),
+                                        fileFilter="GeoTIFF (*.tif *.tiff)"),
+             "ground_heights.tif from the LiDAR road network's raster folder"),
+            (QgsProcessingParameterNumber("TOLERANCE", self.tr("Height tolerance (metres)"),
+                                          QgsProcessingParameterNumber.Double, 0.3,
+                                          minValue=0.01, maxValue=5.0),
+             "largest height difference between a point and its level's surface"),
+            (QgsProcessingParameterFileDestination("OUTPUT", self.tr("Tagged cloud"),
+                                                   "LAZ (*.laz);;LAS (*.las)"),
+             "the copy with road points in class 11"),
+        ]
+        for param, text in params:
+            param.setHelp(self.tr(text))
+            self.addParameter(param)
+        self.addOutput(QgsProcessingOutputNumber("TAGGED", self.tr("Road points tagged")))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
+        with gisroads_errors():
+            result = tag_job(self.parameterAsFile(parameters, "INPUT", context),
+                             self.parameterAsFile(parameters, "POLYGONS", context),
+                             self.parameterAsFile(parameters, "HEIGHTS", context), out,
+                             tolerance_m=self.parameterAsDouble(parameters, "TOLERANCE",
+                                                                context))
+        feedback.pushInfo(f"{result['tagged_points']} road points tagged")
+        return {"OUTPUT": out, "TAGGED": result["tagged_points"]}
