@@ -153,7 +153,7 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
     dict
         Output paths and counts.
     """
-    from .lidar.pipeline import extract_roads
+    from .lidar.pipeline import DEFAULT_WIDTHS_M, extract_roads
     from .lidar.tagging import tag_road_points
 
     roads = extract_roads(cloud_path, progress=scaled(progress, 0.0, 0.85), **options)
@@ -175,7 +175,7 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
             for k, maps in enumerate(tile.likelihood):
                 write_geotiff(rasters / f"{name}_likelihood_level_{k}.tif", maps,
                               band_names=[f"width_{w:g}_m" for w in options.get(
-                                  "widths_m", _default_widths())])
+                                  "widths_m", DEFAULT_WIDTHS_M)])
         write_geotiff(rasters / "ground_heights.tif", roads.heights,
                       band_names=[f"level_{k}" for k in range(roads.heights.data.shape[0])])
         result["rasters"] = rasters
@@ -225,11 +225,6 @@ def tag_job(cloud_path, polygons_path, heights_path, out_path, *,
     heights = read_raster(heights_path)
     tagged = tag_road_points(cloud_path, out_path, polygons, heights, tolerance_m=tolerance_m)
     return {"tagged_las": Path(out_path), "tagged_points": tagged}
-
-
-def _default_widths():
-    from .lidar.pipeline import DEFAULT_WIDTHS_M
-    return DEFAULT_WIDTHS_M
 
 
 def demo_job(out_dir, *, seed: int = 0, progress: Progress = None) -> dict:

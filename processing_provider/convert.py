@@ -9,7 +9,7 @@ import pandas as pd
 import shapely
 from pyproj import CRS
 from qgis.core import (QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink, QgsField,
-                       QgsFields, QgsGeometry, QgsProcessing, QgsProcessingException,
+                       QgsFields, QgsGeometry, QgsProcessingException,
                        QgsProcessingLayerPostProcessorInterface, QgsVectorLayer, QgsWkbTypes)
 from qgis.PyQt.QtCore import QVariant
 
@@ -167,5 +167,3 @@ def open_geopackage_layers(path: str) -> list[tuple[str, QgsVectorLayer, bool]]:
         opened.append((name, layer, bool(styled)))
     return opened
 
-
-TEMPORARY_OUTPUT = QgsProcessing.TEMPORARY_OUTPUT

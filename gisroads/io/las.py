@@ -8,7 +8,6 @@ file's own CRS, which is the CRS outputs are written in.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
@@ -389,6 +388,3 @@ def write_classified(source, target, classify: Callable[[PointCloud], np.ndarray
                 writer.write_points(points)
     return changed
 
-
-def file_size_mb(path) -> float:
-    return os.path.getsize(path) / 1e6

@@ -17,7 +17,7 @@ import shapely
 from affine import Affine
 
 from ..features.edges import local_energy
-from ..geo import GeoRaster, RoadNetwork, network_from_centrelines
+from ..geo import GeoRaster, RoadNetwork
 from ..io.las import LasError, PointCloud, cloud_crs, las_info, read_las
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
@@ -120,10 +120,11 @@ def extract_tile(cloud: PointCloud, tile: Tile, *, cell_m: float = 0.5,
         rectangles.append(selected.assign(level=level))
         likelihood.append(maps)
     rectangles = _concat(rectangles, cloud.crs)
-    lines = (rectangles_to_network(rectangles, method=METHOD).centrelines if len(rectangles)
-             else _no_lines(cloud.crs))
+    lines = rectangles_to_network(rectangles, method=METHOD).centrelines
     report(progress, 1.0, "tile done")
-    return TileRoads(tile, _with_level(lines, rectangles), rectangles,
+    # a centre line takes the ground level of the rectangle nearest to its middle
+    middles = shapely.line_interpolate_point(lines.geometry.values, 0.5, normalized=True)
+    return TileRoads(tile, _with_level(lines, middles, rectangles), rectangles,
                      _concat(hypotheses, cloud.crs), images.image, likelihood, heights)
 
 
@@ -140,17 +141,18 @@ def _concat(frames: list[gpd.GeoDataFrame], crs) -> gpd.GeoDataFrame:
     return gpd.GeoDataFrame(pd.concat(frames, ignore_index=True), crs=crs)
 
 
-def _with_level(lines: gpd.GeoDataFrame, rectangles: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
-    """Give each centre line the ground level of the rectangles it runs through most."""
-    lines = lines.copy()
-    if len(lines) == 0 or len(rectangles) == 0:
-        lines["level"] = np.zeros(len(lines), np.int64)
-        return lines
-    mids = shapely.line_interpolate_point(lines.geometry.values, 0.5, normalized=True)
-    nearest = shapely.STRtree(rectangles.geometry.values).query_nearest(
-        mids, all_matches=False, return_distance=False)[1]
-    lines["level"] = rectangles["level"].to_numpy(np.int64)[nearest]
-    return lines
+def _with_level(frame: gpd.GeoDataFrame, anchors, levelled: gpd.GeoDataFrame
+                ) -> gpd.GeoDataFrame:
+    """``frame`` with the ``level`` of the ``levelled`` feature nearest to each anchor point
+    (one point per row of ``frame``); level 0 when nothing is levelled."""
+    frame = frame.copy()
+    if len(frame) == 0 or len(levelled) == 0:
+        frame["level"] = np.zeros(len(frame), np.int64)
+        return frame
+    nearest = shapely.STRtree(levelled.geometry.values).query_nearest(
+        anchors, all_matches=False, return_distance=False)[1]
+    frame["level"] = levelled["level"].to_numpy(np.int64)[nearest]
+    return frame
 
 
 def auto_cell_m(point_count: int, area_m2: float) -> float:
@@ -225,9 +227,10 @@ def assemble(results: list[TileRoads], *, crs, cell_m: float = 0.5) -> LidarRoad
     working, source = crs
     pieces = [(r.tile, r.centrelines) for r in results]
     lines = stitch_tiles(pieces) if pieces else _no_lines(working).assign(level=0)
-    network = (ribbons_to_network(lines, method=METHOD) if len(lines)
-               else network_from_centrelines(lines, method=METHOD))
-    network.polygons = _polygon_levels(network.polygons, lines)
+    network = ribbons_to_network(lines, method=METHOD)
+    network.polygons = _with_level(network.polygons,
+                                   shapely.point_on_surface(network.polygons.geometry.values),
+                                   lines)
     network.qa = {"rectangles": _concat([_in_core(r.rectangles, r.tile) for r in results],
                                         working),
                   "hypotheses": _concat([_in_core(r.hypotheses, r.tile) for r in results],
@@ -263,15 +266,3 @@ def _mosaic_cores(rasters: list[tuple[Tile, GeoRaster]], cell_m: float) -> GeoRa
         mosaic[:raster.data.shape[0], r0:r1, c0:c1] = \
             raster.data[:, sr:sr + r1 - r0, sc:sc + c1 - c0]
     return GeoRaster(mosaic, transform, rasters[0][1].crs)
-
-
-def _polygon_levels(polygons: gpd.GeoDataFrame, lines: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
-    polygons = polygons.copy()
-    if len(polygons) == 0 or len(lines) == 0:
-        polygons["level"] = np.zeros(len(polygons), np.int64)
-        return polygons
-    nearest = shapely.STRtree(lines.geometry.values).query_nearest(
-        shapely.point_on_surface(polygons.geometry.values), all_matches=False,
-        return_distance=False)[1]
-    polygons["level"] = lines["level"].to_numpy(np.int64)[nearest]
-    return polygons

@@ -497,6 +497,13 @@ def _pieces_to_network(lines, widths_m, scores, areas, crs, *, method: str, join
     return network
 
 
+def _no_roads(crs, method: str, qa: dict | None) -> RoadNetwork:
+    """The contract layers, empty, for input without a single road piece."""
+    empty = gpd.GeoDataFrame({"width_m": np.empty(0)}, geometry=gpd.GeoSeries([], crs=crs),
+                             crs=crs)
+    return network_from_centrelines(empty, method=method, qa=qa)
+
+
 def rectangles_to_network(rectangles: gpd.GeoDataFrame, *, method: str = "zhu-mordohai",
                           join_gap_m: float = JOIN_GAP_M, angle_tol_deg: float = ANGLE_TOL_DEG,
                           smooth_m: float = SMOOTH_M,
@@ -531,6 +538,8 @@ def rectangles_to_network(rectangles: gpd.GeoDataFrame, *, method: str = "zhu-mo
         The contract layers plus the QA layer ``rectangles`` (the input).
     """
     crs = rectangles.crs
+    if len(rectangles) == 0:
+        return _no_roads(crs, method, {"rectangles": rectangles.copy()})
     score = (rectangles["score"].to_numpy(float) if "score" in rectangles
              else np.full(len(rectangles), np.nan))
     return _pieces_to_network(
@@ -568,6 +577,8 @@ def ribbons_to_network(centrelines: gpd.GeoDataFrame, *, method: str,
     -------
     RoadNetwork
     """
+    if len(centrelines) == 0:
+        return _no_roads(centrelines.crs, method, qa)
     lines = np.asarray(centrelines.geometry.values, dtype=object)
     per_vertex = (list(centrelines["widths_m"]) if "widths_m" in centrelines
                   else list(centrelines["width_m"].to_numpy(float)))

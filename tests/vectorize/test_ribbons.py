@@ -192,3 +192,14 @@ def test_ribbons_make_the_same_junctions_and_carry_widths():
                                 method="x")
     assert scalar.junctions["degree"].tolist() == [3]
     assert scalar.polygons["area_m2"].sum() == pytest.approx(100 * 8 + 36 * 7, rel=0.01)
+
+
+def test_no_pieces_give_empty_contract_layers():
+    import geopandas as gpd
+    from gisroads.geo import CONTRACT_SCHEMA
+    empty = gpd.GeoDataFrame(geometry=gpd.GeoSeries([], crs="EPSG:32633"), crs="EPSG:32633")
+    for network in (rectangles_to_network(empty), ribbons_to_network(empty, method="x")):
+        network.validate()
+        assert network.crs == "EPSG:32633"
+        for name in CONTRACT_SCHEMA:
+            assert len(network.layers()[name]) == 0
