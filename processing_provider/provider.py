@@ -1,11 +1,22 @@
-"""The gisroads Processing provider: lists the algorithms."""
+"""The gisroads Processing provider: one algorithm per module of ``algorithms/``."""
+import importlib
+import pkgutil
+
 from qgis.core import QgsProcessingProvider
 
-from .algorithms.evaluate_network import EvaluateRoadNetwork
-from .algorithms.lidar_roads import LidarRoadNetwork
-from .algorithms.open_network import OpenRoadNetwork
-from .algorithms.synthetic_scene import SyntheticRoadScene
-from .algorithms.tag_points import TagRoadPoints
+from . import algorithms
+from .algorithms.base import GisroadsAlgorithm
+
+
+def algorithm_classes() -> list[type[GisroadsAlgorithm]]:
+    """Every algorithm class defined in ``algorithms/``, in module order."""
+    classes = []
+    for module_info in sorted(pkgutil.iter_modules(algorithms.__path__), key=lambda m: m.name):
+        module = importlib.import_module(f"{algorithms.__name__}.{module_info.name}")
+        classes += [value for value in vars(module).values()
+                    if isinstance(value, type) and issubclass(value, GisroadsAlgorithm)
+                    and value.__module__ == module.__name__ and value.NAME]
+    return classes
 
 
 class GisroadsProvider(QgsProcessingProvider):
@@ -20,6 +31,5 @@ class GisroadsProvider(QgsProcessingProvider):
         return f"gisroads {gisroads.__version__}: road networks from LiDAR and imagery"
 
     def loadAlgorithms(self):  # noqa: N802
-        for algorithm in (EvaluateRoadNetwork(), SyntheticRoadScene(), OpenRoadNetwork(),
-                          LidarRoadNetwork(), TagRoadPoints()):
-            self.addAlgorithm(algorithm)
+        for algorithm_class in algorithm_classes():
+            self.addAlgorithm(algorithm_class())

@@ -1,5 +1,7 @@
 """The plugin zip, installed in a throwaway profile, run by the real qgis_process.bin."""
 import json
+import re
+from pathlib import Path
 
 import geopandas as gpd
 import numpy as np
@@ -9,23 +11,26 @@ import shapely
 from gisroads.io.las import read_las
 from gisroads.io.vector import list_layers, read_layer, write_geopackage
 
-ALGORITHMS = ["evaluateroadnetwork", "syntheticroadscene", "openroadnetwork",
-              "lidarroadnetwork", "tagroadpoints"]
+ALGORITHM_DIR = Path(__file__).resolve().parents[2] / "processing_provider" / "algorithms"
+# every NAME = "..." declared by a module of processing_provider/algorithms
+ALGORITHMS = sorted(re.findall(r'^    NAME = "(\w+)"', "".join(
+    p.read_text() for p in ALGORITHM_DIR.glob("*.py")), flags=re.M))
 
 
 def test_provider_lists_every_algorithm(qgis_process):
-    listing = qgis_process("list").stdout
+    listed = re.findall(r"^\s*gisroads:(\w+)", qgis_process("list").stdout, flags=re.M)
+    assert sorted(listed) == ALGORITHMS
+    assert len(ALGORITHMS) >= 5
+
+
+def test_every_parameter_has_help(qgis_process):
     for name in ALGORITHMS:
-        assert f"gisroads:{name}" in listing
-
-
-@pytest.mark.parametrize("name", ALGORITHMS)
-def test_every_parameter_has_help(qgis_process, name):
-    described = json.loads(qgis_process("--json", "help", f"gisroads:{name}").stdout)
-    assert len(described["algorithm_details"]["short_description"]) > 30
-    assert len(qgis_process("help", f"gisroads:{name}").stdout.split("Description")[1]) > 300
-    for param, spec in described["parameters"].items():
-        assert spec.get("help"), f"{name}: parameter {param} has no help text"
+        described = json.loads(qgis_process("--json", "help", f"gisroads:{name}").stdout)
+        assert len(described["algorithm_details"]["short_description"]) > 30, name
+        assert len(qgis_process("help", f"gisroads:{name}").stdout.split("Description")[1]) \
+            > 300, name
+        for param, spec in described["parameters"].items():
+            assert spec.get("help"), f"{name}: parameter {param} has no help text"
 
 
 def test_synthetic_scene_writes_cloud_image_and_truth(scene_dir):
