@@ -1,0 +1,308 @@
+"""Subgraph generation and evaluation: hand-made road parts and rasters with exact answers."""
+import geopandas as gpd
+import numpy as np
+import pytest
+import shapely
+from affine import Affine
+
+from gisroads.imagery.subgraph import (edge_weights, gap_context, gap_edges, link_road_parts,
+                                       linear_weight, road_strings, select_gap_edges)
+
+CRS = "EPSG:32633"
+COS20, SIN20 = np.cos(np.radians(20)), np.sin(np.radians(20))
+
+
+def parts_frame(rows):
+    """rows: (part_id, coords, width_m, quality, mean_b1, mean_b2)."""
+    return gpd.GeoDataFrame(
+        {"part_id": [r[0] for r in rows], "segment_id": [10 + r[0] for r in rows],
+         "width_m": [r[2] for r in rows],
+         "length_m": [shapely.LineString(r[1]).length for r in rows],
+         "quality": [r[3] for r in rows], "mean_b1": [r[4] for r in rows],
+         "mean_b2": [r[5] for r in rows], "mean_intensity": [(r[4] + r[5]) / 2 for r in rows]},
+        geometry=[shapely.LineString(r[1]) for r in rows], crs=CRS)
+
+
+def collinear_with_branch():
+    """A and B collinear 10 m apart; C branches off 20 degrees from 8 m ahead of A's end."""
+    return parts_frame([
+        (1, [(0, 0), (50, 0)], 6.0, 0.9, 0.4, 0.4),
+        (2, [(60, 0), (110, 0)], 6.0, 0.8, 0.4, 0.4),
+        (3, [(58, 3), (58 + 50 * COS20, 3 + 50 * SIN20)], 4.0, 0.7, 0.5, 0.4),
+    ])
+
+
+def gaps_frame(edges):
+    """Hand-made gap edges with given weights: (from_part, from_end, to_part, to_end, w)."""
+    return gpd.GeoDataFrame(
+        {"from_part": [e[0] for e in edges], "from_end": [e[1] for e in edges],
+         "to_part": [e[2] for e in edges], "to_end": [e[3] for e in edges],
+         "weight": [e[4] for e in edges]},
+        geometry=[shapely.LineString([(0, k), (1, k)]) for k in range(len(edges))], crs=CRS)
+
+
+# --- generation -----------------------------------------------------------------------------
+
+def test_gap_edges_link_the_collinear_part_and_keep_the_branch_with_exact_features():
+    gaps = gap_edges(collinear_with_branch())
+    assert list(zip(gaps.from_part, gaps.from_end, gaps.to_part, gaps.to_end)) == [
+        (1, 1, 2, 0), (1, 1, 3, 0)]          # B-C (backwards, 160 degrees) is no link
+    ab, ac = gaps.iloc[0], gaps.iloc[1]
+    assert ab.distance_m == pytest.approx(10.0) and ab.smoothness == pytest.approx(0.0)
+    assert ab.direction_diff_rad == pytest.approx(0.0, abs=1e-9)
+    assert ab.colour_diff == 0.0 and ab.width_diff_m == 0.0 and ab.width_m == 6.0
+    assert ac.distance_m == pytest.approx(np.hypot(8, 3))
+    # lateral offsets: C's start is 3 m off A's axis; A's end 8 sin20 - 3 cos20 off C's
+    assert ac.smoothness == pytest.approx((3 + abs(8 * SIN20 - 3 * COS20)) / 2)
+    assert ac.direction_diff_rad == pytest.approx(np.radians(20))
+    assert ac.colour_diff == pytest.approx(np.sqrt(0.1 ** 2 / 2))
+    assert (ac.quality_from, ac.quality_to, ac.width_diff_m) == (0.9, 0.7, 2.0)
+    assert ac.geometry.equals(shapely.LineString([(50, 0), (58, 3)]))
+    assert gaps.subgraph_id.tolist() == [0, 0] and gaps.crs == CRS
+
+
+def test_gap_edges_respect_each_criterion():
+    parts = collinear_with_branch()
+    assert len(gap_edges(parts, max_direction_diff_rad=np.radians(19))) == 1
+    assert len(gap_edges(parts, max_lateral_offset_m=1.0)) == 1    # C's offset is 1.54 m
+    assert len(gap_edges(parts, max_gap_m=9.0)) == 1                # C is 8.54 m away
+    assert len(gap_edges(parts, max_gap_relative=0.05)) == 0        # 8.5 / 100 > 0.05
+    # side by side (a parallel lane) and overlapping are no continuation
+    lanes = parts_frame([(1, [(0, 0), (50, 0)], 6, 0.9, 0.4, 0.4),
+                         (2, [(40, 3), (90, 3)], 6, 0.9, 0.4, 0.4)])
+    assert len(gap_edges(lanes, max_lateral_offset_m=10)) == 0
+
+
+def test_subgraphs_grow_greedily_from_the_best_part():
+    parts = parts_frame([
+        (5, [(0, 100), (40, 100)], 6, 0.5, 0.4, 0.4),
+        (6, [(50, 100), (90, 100)], 6, 0.6, 0.4, 0.4),
+        (7, [(0, 0), (40, 0)], 6, 0.95, 0.4, 0.4),
+        (8, [(90, 0), (50, 0)], 6, 0.3, 0.4, 0.4),      # drawn backwards
+    ])
+    gaps = gap_edges(parts)
+    # the best part (7) seeds subgraph 0 and is the 'from' side of its link
+    assert list(zip(gaps.subgraph_id, gaps.from_part, gaps.from_end, gaps.to_part,
+                    gaps.to_end)) == [(0, 7, 1, 8, 1), (1, 6, 0, 5, 1)]
+
+
+# --- weights --------------------------------------------------------------------------------
+
+def test_linear_weight_maps_ranges_clips_and_ignores_missing():
+    assert linear_weight([0, 15, 60, 90, np.nan], 0, 60).tolist() == [1, 0.75, 0, 0, 1]
+    assert linear_weight([1.0, 0.25, -1], 1.0, 0.0).tolist() == [1, 0.25, 0]
+
+
+def test_relation_weight_is_the_product_of_the_six_linear_weights():
+    gaps = edge_weights(gap_edges(collinear_with_branch()))
+    # A-B: distance 10 of 60 m, mean quality 0.85, everything else perfect
+    assert gaps.relation_weight[0] == pytest.approx((1 - 10 / 60) * 0.85)
+    lateral = (3 + abs(8 * SIN20 - 3 * COS20)) / 2
+    expected = ((1 - lateral / 6) * (1 - np.hypot(8, 3) / 60) * (1 - (np.pi / 9) / (np.pi / 4))
+                * 0.8 * (1 - np.sqrt(0.005) / 0.25) * (1 - 2 / 5))
+    assert gaps.relation_weight[1] == pytest.approx(expected)
+    # no context computed: the weight is the relation weight
+    assert gaps.context_weight.isna().all()
+    assert gaps.weight.tolist() == gaps.relation_weight.tolist()
+    narrow = edge_weights(gap_edges(collinear_with_branch()),
+                          weight_ranges={"distance_m": (0.0, 20.0)})
+    assert narrow.relation_weight[0] == pytest.approx(0.5 * 0.85)
+
+
+def test_unknown_weight_names_are_refused():
+    with pytest.raises(ValueError, match="unknown"):
+        edge_weights(gap_edges(collinear_with_branch()), weight_ranges={"speed": (0, 1)})
+
+
+# --- the integer program --------------------------------------------------------------------
+
+def test_integer_program_keeps_the_collinear_link_and_rejects_the_branch():
+    gaps, strings = link_road_parts(collinear_with_branch())
+    assert gaps.selected.tolist() == [True, False]
+    assert gaps.attrs["optimal"]
+    assert strings.part_ids.tolist() == ["1,2", "3"]
+    assert strings.geometry[0].equals(shapely.LineString([(0, 0), (50, 0), (60, 0), (110, 0)]))
+
+
+def test_integer_program_beats_greedy():
+    gaps = gaps_frame([(1, 1, 2, 0, 0.6), (1, 1, 3, 0, 0.5), (4, 1, 2, 0, 0.5)])
+    greedy, booked = 0.0, set()
+    for row in gaps.sort_values("weight", ascending=False).itertuples():
+        ends = {(row.from_part, row.from_end), (row.to_part, row.to_end)}
+        if not ends & booked:
+            greedy, booked = greedy + row.weight, booked | ends
+    assert greedy == pytest.approx(0.6)
+    chosen = select_gap_edges(gaps)
+    assert chosen.selected.tolist() == [False, True, True]
+    assert chosen.attrs["objective"] == pytest.approx(1.0) and chosen.attrs["optimal"]
+
+
+def test_at_most_one_connection_per_end_and_nonpositive_weights_never_kept():
+    # X.0 (part 9) is the best partner of both A.1 (1) and C.1 (3): picking each end's
+    # best would book X.0 twice
+    gaps = gaps_frame([(1, 1, 9, 0, 0.9), (3, 1, 9, 0, 0.8), (1, 1, 4, 0, 0.5),
+                       (3, 1, 5, 0, 0.3), (6, 1, 7, 0, 0.0), (7, 1, 8, 0, -0.2)])
+    chosen = select_gap_edges(gaps)
+    assert chosen.selected.tolist() == [False, True, True, False, False, False]
+    assert chosen.attrs["objective"] == pytest.approx(1.3)
+    kept = chosen[chosen.selected]
+    ends = list(zip(kept.from_part, kept.from_end)) + list(zip(kept.to_part, kept.to_end))
+    assert len(ends) == len(set(ends))
+
+
+def test_select_needs_weights_and_handles_no_candidates():
+    with pytest.raises(ValueError, match="weight"):
+        select_gap_edges(gaps_frame([(1, 1, 2, 0, 0.5)]).drop(columns="weight"))
+    assert select_gap_edges(gaps_frame([(1, 1, 2, 0, 0.0)])).selected.tolist() == [False]
+    assert len(select_gap_edges(gaps_frame([]))) == 0
+
+
+# --- context --------------------------------------------------------------------------------
+
+GRID = Affine(1.0, 0.0, -10.0, 0.0, -1.0, 20.0)     # 1 m pixels, x -10..110, y -20..20
+SHAPE = (40, 120)
+
+
+def two_parts(gap_end=60.0):
+    return parts_frame([(1, [(0, 0), (40, 0)], 6.0, 0.9, 0.4, 0.4),
+                        (2, [(gap_end, 0), (gap_end + 40, 0)], 6.0, 0.9, 0.4, 0.4)])
+
+
+def block(value, x0, x1, y0, y1, background=0.0):
+    """A raster on GRID with ``value`` over x0..x1, y0..y1 (metres)."""
+    raster = np.full(SHAPE, background)
+    raster[20 - y1:20 - y0, x0 + 10:x1 + 10] = value
+    return raster
+
+
+def test_building_in_the_gap_gives_minus_ten_and_blocks_the_only_link():
+    parts = two_parts()
+    gaps, _ = link_road_parts(parts, transform=GRID, ndsm=block(8.0, 45, 55, -5, 5))
+    assert gaps.n_building.tolist() == [1] and gaps.occlusion.tolist() == [0.0]
+    assert gaps.context_weight.tolist() == [-10.0]
+    assert gaps.weight.tolist() == [0.0] and gaps.selected.tolist() == [False]
+    clear, strings = link_road_parts(parts, transform=GRID, ndsm=np.zeros(SHAPE))
+    assert clear.context_weight.tolist() == [0.0]
+    assert clear.weight[0] == pytest.approx(clear.relation_weight[0] / 2)
+    assert clear.selected.tolist() == [True] and strings.part_ids.tolist() == ["1,2"]
+
+
+def test_a_tree_occluding_the_gap_supports_the_link_a_lawn_blocks_it():
+    parts = two_parts()
+    crown = block(0.8, 38, 62, -6, 6)               # NDVI high over the whole gap
+    gaps, _ = link_road_parts(parts, transform=GRID, ndvi=crown)
+    assert gaps.n_tree.tolist() == [1] and gaps.occlusion.tolist() == [1.0]
+    assert gaps.context_weight.tolist() == [1.0]
+    assert gaps.weight[0] == pytest.approx((gaps.relation_weight[0] + 1.0) / 2)
+    assert gaps.selected.tolist() == [True]
+    high, _ = link_road_parts(parts, transform=GRID, ndvi=crown, ndsm=block(9.0, 38, 62, -6, 6))
+    assert (high.n_tree[0], high.n_building[0], high.occlusion[0]) == (1, 0, 1.0)
+    assert high.selected.tolist() == [True]
+    lawn, _ = link_road_parts(parts, transform=GRID, ndvi=crown, ndsm=np.zeros(SHAPE))
+    assert (lawn.n_vegetated_area[0], lawn.n_tree[0]) == (1, 0)
+    assert lawn.context_weight.tolist() == [-0.5] and lawn.selected.tolist() == [False]
+
+
+def test_small_gaps_ignore_their_context():
+    parts = two_parts(gap_end=42.0)                  # 2 m gap with a building in it
+    gaps, _ = link_road_parts(parts, transform=GRID, ndsm=block(8.0, 40, 42, -5, 5))
+    assert gaps.n_building.tolist() == [1] and gaps.context_weight.tolist() == [-10.0]
+    assert gaps.weight.tolist() == gaps.relation_weight.tolist()
+    assert gaps.selected.tolist() == [True]
+
+
+def test_vehicles_shadow_and_asphalt_from_height_and_intensity():
+    parts = two_parts()
+    intensity = block(0.05, 40, 45, -3, 3, background=0.4)    # a shadow at the gap's start
+    ndsm = block(1.5, 50, 54, -1, 1)                          # a car: 8 m2, 1.5 m high
+    gaps = gap_context(gap_edges(parts), transform=GRID, ndsm=ndsm, intensity=intensity)
+    row = gaps.iloc[0]
+    assert (row.n_vehicle, row.n_building, row.n_shadow, row.n_asphalt) == (1, 0, 1, 1)
+    assert row.occlusion == pytest.approx((5 * 6 + 4 * 2) / (20 * 6))
+    assert row.context_cues == "ndsm,intensity"
+    weighted = edge_weights(gaps)
+    assert weighted.context_weight[0] == pytest.approx(0.5 + 0.5 + row.occlusion)
+
+
+def test_repeated_appearances_count_harmonically():
+    cars = np.zeros(SHAPE)
+    for x in (42, 47, 52, 57):                                 # four separate cars
+        cars += block(1.5, x, x + 2, -1, 1)
+    gaps = edge_weights(gap_context(gap_edges(two_parts()), transform=GRID, ndsm=cars))
+    assert gaps.n_vehicle.tolist() == [4]
+    occlusion = 4 * 4 / 120
+    assert gaps.context_weight[0] == pytest.approx(0.5 * (1 + 1 / 2 + 1 / 3 + 1 / 4) + occlusion)
+
+
+def test_colour_vegetation_without_nir_and_gaps_off_the_raster():
+    rgb = np.stack([np.full(SHAPE, 0.3), np.full(SHAPE, 0.3), np.full(SHAPE, 0.3)])
+    rgb[1] = block(0.6, 38, 62, -6, 6, background=0.3)         # green over the gap
+    gaps = gap_context(gap_edges(two_parts()), transform=GRID, rgb=rgb)
+    assert gaps.n_tree.tolist() == [1] and gaps.occlusion.tolist() == [1.0]
+    far = gap_context(gap_edges(two_parts()), transform=Affine(1.0, 0.0, 490.0, 0.0, -1.0, 20.0),
+                      rgb=rgb)
+    assert far.occlusion.isna().all()
+    assert edge_weights(far).weight.tolist() == edge_weights(far).relation_weight.tolist()
+
+
+def test_context_input_errors():
+    gaps = gap_edges(two_parts())
+    with pytest.raises(ValueError, match="at least one raster"):
+        gap_context(gaps, transform=GRID)
+    with pytest.raises(ValueError, match="one grid"):
+        gap_context(gaps, transform=GRID, ndvi=np.zeros(SHAPE), ndsm=np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="transform"):
+        link_road_parts(two_parts(), ndsm=np.zeros(SHAPE))
+
+
+# --- road strings ---------------------------------------------------------------------------
+
+def test_road_strings_chain_reversed_parts_in_order():
+    parts = parts_frame([
+        (3, [(0, 0), (10, 0)], 4.0, 0.5, 0.4, 0.4),
+        (7, [(30, 0), (20, 0)], 6.0, 0.7, 0.4, 0.4),       # drawn backwards
+        (9, [(40, 0), (60, 0)], 8.0, 0.9, 0.4, 0.4),
+        (11, [(0, 50), (10, 50)], 5.0, 0.2, 0.4, 0.4),     # alone
+    ])
+    gaps = gaps_frame([(3, 1, 7, 1, 0.9), (9, 0, 7, 0, 0.8), (3, 1, 11, 0, 0.1)])
+    gaps["selected"] = [True, True, False]
+    strings = road_strings(parts, gaps)
+    assert strings.part_ids.tolist() == ["3,7,9", "11"]
+    assert strings.n_parts.tolist() == [3, 1] and strings.string_id.tolist() == [0, 1]
+    assert shapely.get_coordinates(strings.geometry[0]).tolist() == [
+        [0, 0], [10, 0], [20, 0], [30, 0], [40, 0], [60, 0]]
+    assert strings.width_m[0] == pytest.approx((4 * 10 + 6 * 10 + 8 * 20) / 40)
+    assert strings.quality[0] == pytest.approx((0.5 * 10 + 0.7 * 10 + 0.9 * 20) / 40)
+    assert strings.length_m.tolist() == [60.0, 10.0]
+
+
+def test_a_ring_of_links_gives_a_closed_string():
+    square = [[(0, 0), (10, 0)], [(20, 0), (20, 10)], [(20, 20), (10, 20)], [(0, 20), (0, 10)]]
+    parts = parts_frame([(k, c, 5.0, 0.5, 0.4, 0.4) for k, c in enumerate(square)])
+    gaps = gaps_frame([(0, 1, 1, 0, 1), (1, 1, 2, 0, 1), (2, 1, 3, 0, 1), (3, 1, 0, 0, 1)])
+    gaps["selected"] = True
+    strings = road_strings(parts, gaps)
+    assert strings.part_ids.tolist() == ["0,1,2,3"]
+    assert strings.geometry[0].is_ring and strings.length_m[0] == pytest.approx(4 * 10 + 4 * 10)
+
+
+def test_road_strings_refuse_a_double_booked_end():
+    parts = collinear_with_branch()
+    gaps = gap_edges(parts)
+    gaps["selected"] = True            # e.g. edited by hand in QGIS
+    with pytest.raises(ValueError, match="part 1 end 1 has more than one"):
+        road_strings(parts, gaps)
+
+
+def test_bad_road_parts_are_refused():
+    parts = collinear_with_branch()
+    with pytest.raises(ValueError, match="lacks columns"):
+        gap_edges(parts.drop(columns="quality"))
+    with pytest.raises(ValueError, match="projected CRS"):
+        gap_edges(parts.to_crs("EPSG:4326"))
+    with pytest.raises(ValueError, match="duplicate part_id"):
+        gap_edges(parts.assign(part_id=[1, 1, 2]))
+    with pytest.raises(ValueError, match="LineString"):
+        gap_edges(parts.set_geometry(parts.buffer(1.0)))
+    assert len(gap_edges(parts.iloc[:0])) == 0
+    assert len(road_strings(parts.iloc[:0], gap_edges(parts.iloc[:0]).assign(selected=[]))) == 0
