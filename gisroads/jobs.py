@@ -227,6 +227,66 @@ def tag_job(cloud_path, polygons_path, heights_path, out_path, *,
     return {"tagged_las": Path(out_path), "tagged_points": tagged}
 
 
+def blocks_job(likelihood_path, out_path, *, points_path=None, quicklook=None,
+               progress: Progress = None, **options) -> dict:
+    """City blocks (Zhu & Mordohai, section 5) of a road-likelihood raster into a GeoPackage.
+
+    ``likelihood_path``: a ``*_likelihood_level_*.tif`` of ``gisroads lidar --rasters`` or
+    any single-band road-probability raster (see :func:`gisroads.blocks.road_likelihood`).
+    ``points_path``: a LAS/LAZ whose ground points (class 2; every point when the file has
+    none) are the graph's nodes, streamed and thinned chunk by chunk, reprojected to the
+    raster's CRS. Writes the ``city_blocks`` layer to ``out_path`` and optionally a
+    ``quicklook`` PNG of the blocks over the likelihood. ``options`` go to
+    :func:`gisroads.blocks.city_blocks`.
+    """
+    from .blocks import SAMPLE_SPACING_M, city_blocks, road_likelihood
+
+    raster = read_raster(likelihood_path)
+    points = None
+    if points_path is not None:
+        points = _ground_points_xy(points_path, raster.crs,
+                                   options.get("sample_spacing_m", SAMPLE_SPACING_M))
+    blocks = city_blocks(raster, points_xy=points, progress=scaled(progress, 0.0, 0.9),
+                         **options)
+    if len(blocks) == 0:
+        raise ValueError(f"{likelihood_path}: no city block of the minimum area was found")
+    write_geopackage(out_path, {"city_blocks": blocks})
+    result = {"gpkg": Path(out_path), "blocks": len(blocks),
+              "segments": int(blocks.segment.nunique()),
+              "area_m2": float(blocks.area_m2.sum())}
+    if quicklook is not None:
+        band = road_likelihood(raster, **{k: options[k] for k in ("l_max", "probability")
+                                          if k in options})
+        write_quicklook(quicklook, [
+            (blocks, dict(column="block_id", cmap="tab20", alpha=0.45, edgecolor="black",
+                          linewidth=0.8)),
+        ], background=band, title=f"{Path(likelihood_path).name}: {len(blocks)} city blocks")
+        result["quicklook"] = Path(quicklook)
+    report(progress, 1.0, "done")
+    return result
+
+
+def _ground_points_xy(cloud_path, crs, spacing_m: float):
+    """Ground points of a cloud (class 2, or all points when none is), thinned to one per
+    half node spacing per chunk, in ``crs``."""
+    import numpy as np
+    from pyproj import Transformer
+
+    from .blocks import thin_points
+    from .io.las import iter_las_chunks
+
+    ground, every = [], []
+    for chunk in iter_las_chunks(cloud_path):
+        xy = chunk.xyz[:, :2]
+        if chunk.crs is not None and crs is not None and chunk.crs != crs:
+            xy = np.column_stack(Transformer.from_crs(chunk.crs, crs, always_xy=True)
+                                 .transform(xy[:, 0], xy[:, 1]))
+        ground.append(thin_points(xy[chunk.classification == 2], spacing_m / 2))
+        every.append(thin_points(xy, spacing_m / 2))
+    ground = np.concatenate(ground)
+    return ground if len(ground) else np.concatenate(every)
+
+
 def demo_job(out_dir, *, seed: int = 0, progress: Progress = None) -> dict:
     """The demo: a synthetic scene, its truth, a degraded copy scored against it, a PNG.
 
