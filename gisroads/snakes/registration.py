@@ -427,7 +427,8 @@ def register_map(lines: gpd.GeoDataFrame, cloud: PointCloud, *, control_spacing_
     Departures from the paper, and why: the map's 2D polylines are kept as they are (the
     spline is fitted to elevations along them, so horizontal errors stay for the snakes to
     fix); a weak second-difference term between consecutive controls decides the controls
-    no point constrains (a gap in the data); and the incline clamp limits the step to the
+    no point constrains (a gap in the data; a road without any point near its samples takes
+    the median elevation of the map's points); and the incline clamp limits the step to the
     incline instead of copying the preceding sample, so one stray point cannot flatten the
     rest of a ramp.
 

@@ -1,0 +1,301 @@
+"""Subclouds per road patch (Boyko & Funkhouser 2011, section 2.2).
+
+Every road of a registered map (the spline between two intersections) gets the points of
+its own level around it: a support plane is fitted at each 1 m sample to the points within
+4 m, and the subcloud keeps the points within 0.5 m of that plane and 22 m of the sample.
+Points on a bridge deck and on the road under it lie metres apart vertically, so they fall
+into different subclouds.
+
+The cloud is read chunk by chunk through a grid of buckets over the map's corridor (the
+paper's out-of-core 2D grid index), so a file larger than memory works: only the
+subclouds are held.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..io.las import DEFAULT_CHUNK, PointCloud, concatenate, iter_las_chunks, subset
+from ..progress import Progress, report
+from .registration import RegisteredMap
+
+MIN_PLANE_POINTS = 10
+"""Fewest points a support plane is fitted to; with fewer the prior plane stands."""
+MIN_PLANE_SPREAD_M = 0.5
+"""Smallest horizontal spread (standard deviation across the points' main axis, metres)
+of the points a plane is fitted to: points along a line do not fix a plane."""
+
+
+@dataclass
+class RoadPatch:
+    """One road of the map and the points of its subcloud.
+
+    Attributes
+    ----------
+    road_id : int
+        ``road_id`` of the registered map's line.
+    samples_xyz : ndarray, shape (k, 3)
+        The road's registered samples (metres).
+    tangent : ndarray, shape (k, 2)
+        Unit XY direction of the road at each sample.
+    plane_normal : ndarray, shape (k, 3)
+        Unit upward normal of the support plane at each sample.
+    plane_z : ndarray, shape (k,)
+        Elevation of the support plane at the sample's XY (metres).
+    points : ndarray, shape (m, 3)
+        The subcloud (metres).
+    intensity : ndarray of uint16, shape (m,)
+        Zero where the source records none.
+    sample_index : ndarray of int, shape (m,)
+        Nearest sample of each point (index into ``samples_xyz``).
+    point_index : ndarray of int64, shape (m,)
+        Position of each point in the source (the cloud's order, or the file's point
+        order), so that a later stage can classify them.
+    """
+
+    road_id: int
+    samples_xyz: np.ndarray
+    tangent: np.ndarray
+    plane_normal: np.ndarray
+    plane_z: np.ndarray
+    points: np.ndarray
+    intensity: np.ndarray
+    sample_index: np.ndarray
+    point_index: np.ndarray
+
+
+def iter_source(source, *, chunk_size: int = DEFAULT_CHUNK) -> Iterator[tuple[int, PointCloud]]:
+    """``(offset of the chunk's first point, chunk)`` of a PointCloud or a LAS/LAZ path."""
+    if chunk_size <= 0:
+        raise ValueError(f"chunk_size must be positive, got {chunk_size}")
+    if isinstance(source, PointCloud):
+        for start in range(0, len(source), chunk_size):
+            yield start, subset(source, slice(start, start + chunk_size))
+        return
+    if not isinstance(source, (str, Path)):
+        raise ValueError(f"source must be a PointCloud or a LAS/LAZ path, got {type(source)}")
+    offset = 0
+    for chunk in iter_las_chunks(source, chunk_size=chunk_size):
+        yield offset, chunk
+        offset += len(chunk)
+
+
+class GridBuckets:
+    """Square grid cells around groups of sample points, to fetch a chunk's nearby points.
+
+    Parameters
+    ----------
+    xy : ndarray, shape (n, 2)
+        Sample positions (metres).
+    group : ndarray of int, shape (n,)
+        Group (road) of each sample.
+    reach_m : float
+        Points within this distance of a group's samples are in its cells: the cell side,
+        and one ring of cells is added around each sample's cell.
+    """
+
+    def __init__(self, xy: np.ndarray, group: np.ndarray, reach_m: float):
+        self.cell_m = float(reach_m)
+        cells = np.floor(np.asarray(xy) / self.cell_m).astype(np.int64)
+        ring = np.array([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)])
+        near = (cells[:, None, :] + ring[None]).reshape(-1, 2)
+        keys = self._key(near)
+        groups = np.repeat(np.asarray(group), len(ring))
+        self.cells = {int(g): np.unique(keys[groups == g]) for g in np.unique(groups)}
+        self.corridor = np.unique(keys)
+
+    @staticmethod
+    def _key(cells: np.ndarray) -> np.ndarray:
+        return (cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF)
+
+    def keys(self, xy: np.ndarray) -> np.ndarray:
+        """Cell key of each point."""
+        return self._key(np.floor(xy / self.cell_m).astype(np.int64))
+
+    def in_corridor(self, xy: np.ndarray) -> np.ndarray:
+        """Which points fall in any group's cells."""
+        return np.isin(self.keys(xy), self.corridor)
+
+    def members(self, sorted_keys: np.ndarray, group: int) -> np.ndarray:
+        """Positions, in an array of point keys sorted ascending, of the group's points."""
+        cells = self.cells[group]
+        lo = np.searchsorted(sorted_keys, cells, "left")
+        hi = np.searchsorted(sorted_keys, cells, "right")
+        lengths = hi - lo
+        starts = np.repeat(lo - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
+        return starts + np.arange(int(lengths.sum()))
+
+
+def read_corridor(source, xy: np.ndarray, radius_m: float, *,
+                  chunk_size: int = DEFAULT_CHUNK) -> tuple[PointCloud, np.ndarray]:
+    """The points of a source within ``radius_m`` (XY) of any of the positions ``xy``.
+
+    Returns
+    -------
+    cloud : PointCloud
+    point_index : ndarray of int64
+        Position of each point in the source.
+    """
+    xy = np.asarray(xy, float)
+    index = GridBuckets(xy, np.zeros(len(xy), np.int64), radius_m)
+    tree = cKDTree(xy)
+    parts, indices = [], []
+    for offset, chunk in iter_source(source, chunk_size=chunk_size):
+        candidate = np.flatnonzero(index.in_corridor(chunk.xyz[:, :2]))
+        distance, _ = tree.query(chunk.xyz[candidate, :2], distance_upper_bound=radius_m)
+        keep = candidate[np.isfinite(distance)]
+        parts.append(subset(chunk, keep))
+        indices.append(offset + keep)
+    return concatenate(parts), np.concatenate(indices).astype(np.int64)
+
+
+def _grades(registered: RegisteredMap) -> np.ndarray:
+    """Along-road grade (rise over run) at each sample, from the registered elevations."""
+    grade = np.zeros(len(registered.station_m))
+    bounds = np.flatnonzero(np.diff(registered.road_id)) + 1
+    for idx in np.split(np.arange(len(grade)), bounds):
+        if len(idx) >= 2:
+            grade[idx] = np.gradient(registered.xyz[idx, 2], registered.station_m[idx])
+    return grade
+
+
+def _fit_planes(moments: np.ndarray, prior: np.ndarray) -> np.ndarray:
+    """Least-squares planes dz = a + b dx + c dy from summed moments (n, 9) per sample;
+    the prior (a, b, c) where the points are too few or too narrow."""
+    n, sx, sy, sxx, sxy, syy, sz, sxz, syz = moments.T
+    normal = np.stack([np.stack([n, sx, sy], -1), np.stack([sx, sxx, sxy], -1),
+                       np.stack([sy, sxy, syy], -1)], -2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        vx, vy = sxx / n - (sx / n) ** 2, syy / n - (sy / n) ** 2
+        cxy = sxy / n - sx * sy / n**2
+        spread = (vx + vy) / 2 - np.sqrt(((vx - vy) / 2) ** 2 + cxy**2)
+    good = (n >= MIN_PLANE_POINTS) & (spread >= MIN_PLANE_SPREAD_M**2)
+    planes = prior.copy()
+    if good.any():
+        rhs = np.stack([sz, sxz, syz], -1)[good][..., None]
+        planes[good] = np.linalg.solve(normal[good], rhs)[..., 0]
+    return planes
+
+
+def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4.0,
+                 plane_tolerance_m: float = 0.5, reach_m: float = 22.0,
+                 chunk_size: int = DEFAULT_CHUNK, progress: Progress = None
+                 ) -> list[RoadPatch]:
+    """Subclouds of the roads of a registered map (section 2.2 of Boyko & Funkhouser).
+
+    1. At each sample s, a support plane P(s) is fitted by least squares to the points
+       within ``plane_radius_m`` of s (XY) that lie within ``plane_tolerance_m`` of the
+       prior plane through s rising with the road's registered grade: the prior keeps the
+       deck out of the plane of the road under it, and the road out of the deck's.
+       Where fewer than ten points, or points along a line only, are found, the prior
+       stands.
+    2. A point joins the subcloud of a road when it lies within ``reach_m`` of the
+       road's nearest sample s and within ``plane_tolerance_m`` of P(s). The paper merges
+       the working sets of all the samples within reach; testing the nearest sample's
+       plane only keeps a point under a deck out of the deck road's subcloud even where
+       a ramp sample farther away passes at the point's height.
+
+    The source is read twice (planes, then subclouds), chunk by chunk; a chunk's points
+    are looked up through a grid of ``reach_m`` buckets over the roads' corridors.
+
+    Parameters
+    ----------
+    registered : RegisteredMap
+        From :func:`gisroads.snakes.registration.register_map`, in the source's CRS.
+    source : PointCloud or path
+        The cloud, or a LAS/LAZ file read through
+        :func:`gisroads.io.las.iter_las_chunks`.
+    plane_radius_m : float
+        Radius of the support plane's points (paper: 4 m).
+    plane_tolerance_m : float
+        Half height of the subcloud's window around the plane (paper: 0.5 m).
+    reach_m : float
+        Horizontal reach of a sample (paper: 22 m, six 3.66 m lanes).
+    chunk_size : int
+        Points read at a time.
+    progress : callable, optional
+
+    Returns
+    -------
+    list of RoadPatch
+        One per road, in the order of ``registered.lines``.
+    """
+    for name, value in (("plane_radius_m", plane_radius_m),
+                        ("plane_tolerance_m", plane_tolerance_m), ("reach_m", reach_m)):
+        if not value > 0:
+            raise ValueError(f"{name} must be positive, got {value}")
+    xyz, tangent, road_of = registered.xyz, registered.tangent, registered.road_id
+    n = len(xyz)
+    grade = _grades(registered)
+    prior = np.column_stack([np.zeros(n), grade * tangent[:, 0], grade * tangent[:, 1]])
+    index = GridBuckets(xyz[:, :2], road_of, reach_m)
+    sample_tree = cKDTree(xyz[:, :2])
+
+    report(progress, 0.0, "fitting the support planes")
+    moments = np.zeros((n, 9))
+    for offset, chunk in iter_source(source, chunk_size=chunk_size):
+        report(progress, 0.0, f"support planes: {offset + len(chunk)} points read")
+        candidate = chunk.xyz[index.in_corridor(chunk.xyz[:, :2])]
+        if len(candidate) == 0:
+            continue
+        pairs = sample_tree.sparse_distance_matrix(cKDTree(candidate[:, :2]), plane_radius_m,
+                                                   output_type="ndarray")
+        s, p = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+        dx, dy = (candidate[p, :2] - xyz[s, :2]).T
+        dz = candidate[p, 2] - xyz[s, 2]
+        near = np.abs(dz - prior[s, 1] * dx - prior[s, 2] * dy) <= plane_tolerance_m
+        s, dx, dy, dz = s[near], dx[near], dy[near], dz[near]
+        for k, w in enumerate((None, dx, dy, dx * dx, dx * dy, dy * dy, dz, dx * dz, dy * dz)):
+            moments[:, k] += np.bincount(s, w, minlength=n)
+    planes = _fit_planes(moments, prior)
+    normal = np.column_stack([-planes[:, 1], -planes[:, 2], np.ones(n)])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+
+    report(progress, 0.5, "extracting the subclouds")
+    roads = registered.lines["road_id"].to_numpy()
+    first = {int(r): int(np.searchsorted(road_of, r)) for r in roads}
+    trees = {int(r): cKDTree(xyz[road_of == r, :2]) for r in roads}
+    found: dict[int, list] = {int(r): [] for r in roads}
+    for offset, chunk in iter_source(source, chunk_size=chunk_size):
+        report(progress, 0.5, f"subclouds: {offset + len(chunk)} points read")
+        keys = index.keys(chunk.xyz[:, :2])
+        order = np.argsort(keys, kind="stable")
+        sorted_keys = keys[order]
+        intensity = (chunk.intensity if chunk.intensity is not None
+                     else np.zeros(len(chunk), np.uint16))
+        for r in found:
+            local = order[index.members(sorted_keys, r)]
+            if len(local) == 0:
+                continue
+            distance, nearest = trees[r].query(chunk.xyz[local, :2], distance_upper_bound=reach_m)
+            hit = np.isfinite(distance)
+            local, nearest = local[hit], nearest[hit]
+            s = first[r] + nearest
+            dx, dy = (chunk.xyz[local, :2] - xyz[s, :2]).T
+            residual = chunk.xyz[local, 2] - xyz[s, 2] - (planes[s, 0] + planes[s, 1] * dx
+                                                          + planes[s, 2] * dy)
+            keep = np.abs(residual) <= plane_tolerance_m
+            local, nearest = local[keep], nearest[keep]
+            found[r].append((chunk.xyz[local], intensity[local], nearest, offset + local))
+
+    none = (np.empty((0, 3)), np.empty(0, np.uint16), np.empty(0, np.int64),
+            np.empty(0, np.int64))
+    patches = []
+    for r in roads:
+        points, intensity, nearest, point_index = (
+            np.concatenate(column) for column in zip(*(found[int(r)] or [none])))
+        order = np.argsort(point_index, kind="stable")  # the source's order
+        s = np.flatnonzero(road_of == r)
+        patches.append(RoadPatch(
+            road_id=int(r), samples_xyz=xyz[s], tangent=tangent[s], plane_normal=normal[s],
+            plane_z=xyz[s, 2] + planes[s, 0], points=points[order],
+            intensity=intensity[order].astype(np.uint16),
+            sample_index=nearest[order].astype(np.int64),
+            point_index=point_index[order].astype(np.int64)))
+    report(progress, 1.0, f"{len(patches)} subclouds, "
+                          f"{sum(len(p.points) for p in patches)} points")
+    return patches
