@@ -50,6 +50,8 @@ ours (module constants, all parameters):
   +0.5; trees and shadow 0, as they support a link through the occlusion share instead.
   Without an nDSM vegetation cannot be split into trees and lawns and counts as trees, the
   usual cause of a road part missing between two others.
+- A raised road (bridge deck, ramp) reads as a building in the nDSM. With a DSM the
+  road-part stage keeps only parts low in the nDSM, so no such parts reach this stage.
 """
 from __future__ import annotations
 
@@ -328,6 +330,14 @@ def _object_masks(ndvi, ndsm, intensity, rgb, *, ndvi_vegetation, exg_vegetation
             "shadow": shadow, "asphalt": asphalt}
 
 
+def _majority(mask: np.ndarray, size_px: int) -> np.ndarray:
+    """Pixels where most of the ``size_px`` square around them is in ``mask``: single noisy
+    pixels go, objects keep their outline."""
+    if size_px <= 1:
+        return mask
+    return ndimage.uniform_filter(mask.astype(np.float32), size_px, mode="nearest") > 0.5
+
+
 def _appearances(mask, corridor, min_pixels) -> int:
     """Objects (8-connected) of ``mask`` with at least ``min_pixels`` inside ``corridor``."""
     labels, count = ndimage.label(mask & corridor, structure=np.ones((3, 3)))
@@ -373,8 +383,9 @@ def gap_context(gaps: gpd.GeoDataFrame, *, transform: Affine, ndvi=None, ndsm=No
                 exg_vegetation: float = 0.1, tree_height_m: float = 2.0,
                 vehicle_height_m: float = 1.0, building_height_m: float = 2.5,
                 max_vehicle_m2: float = 15.0, shadow_intensity: float = 0.15,
-                bright_intensity: float = 0.85, grey_saturation: float = 0.25,
-                min_object_m2: float = 1.0, progress: Progress = None) -> gpd.GeoDataFrame:
+                bright_intensity: float = 0.85, grey_saturation: float = 0.35,
+                smooth_m: float = 1.0, min_object_m2: float = 1.0,
+                progress: Progress = None) -> gpd.GeoDataFrame:
     """Context objects in each gap's road-part hypothesis and its occluded share (Sec. 2.2.2).
 
     The hypothesis is the gap line buffered by half its ``width_m`` (flat caps). Inside it,
@@ -384,10 +395,12 @@ def gap_context(gaps: gpd.GeoDataFrame, *, transform: Affine, ndvi=None, ndsm=No
     vehicle_height_m``) split into buildings (reaching ``building_height_m`` or larger than
     ``max_vehicle_m2``) and vehicles; shadow (``intensity < shadow_intensity``); and
     asphalt-like surface (neither of those, intensity up to ``bright_intensity``, low above
-    ground, grey: HSV saturation up to ``grey_saturation`` when ``rgb`` is given). Objects
-    are 8-connected regions with at least ``min_object_m2`` inside the hypothesis; each is
-    one appearance of its relation category in Eq. 2. Vehicles need an nDSM; trees and
-    vegetated areas are told apart only with one (without, vegetation counts as trees).
+    ground, grey: HSV saturation up to ``grey_saturation`` when ``rgb`` is given). Each class
+    is cleaned by a majority vote over ``smooth_m`` squares (pixel noise would otherwise
+    split one asphalt area into many); objects are then 8-connected regions with at least
+    ``min_object_m2`` inside the hypothesis, each one appearance of its relation category
+    in Eq. 2. Vehicles need an nDSM; trees and vegetated areas are told apart only with one
+    (without, vegetation counts as trees).
 
     Parameters
     ----------
@@ -413,7 +426,7 @@ def gap_context(gaps: gpd.GeoDataFrame, *, transform: Affine, ndvi=None, ndsm=No
         length).
     """
     rasters = {"ndvi": ndvi, "ndsm": ndsm, "intensity": intensity, "rgb": rgb}
-    given = {k: np.asarray(v, float) for k, v in rasters.items() if v is not None}
+    given = {k: np.asarray(v) for k, v in rasters.items() if v is not None}
     if not given:
         raise ValueError("gap_context needs at least one raster (ndvi, ndsm, intensity, rgb)")
     if "rgb" in given and (given["rgb"].ndim != 3 or given["rgb"].shape[0] != 3):
@@ -427,6 +440,7 @@ def gap_context(gaps: gpd.GeoDataFrame, *, transform: Affine, ndvi=None, ndsm=No
     shape = next(iter(shapes.values()))
     pixel_m2 = abs(transform.a * transform.e - transform.b * transform.d)
     min_pixels = max(1, int(np.ceil(min_object_m2 / pixel_m2)))
+    smooth_px = 2 * int(round(smooth_m / np.sqrt(pixel_m2) / 2)) + 1
     kinds = ("building", "vehicle", "tree", "vegetated_area", "shadow", "asphalt")
     counts = np.full((len(gaps), len(kinds)), np.nan)
     occlusion = np.full(len(gaps), np.nan)
@@ -440,7 +454,8 @@ def gap_context(gaps: gpd.GeoDataFrame, *, transform: Affine, ndvi=None, ndsm=No
         rows, cols = np.mgrid[window[0], window[1]] + 0.5
         x = transform.a * cols + transform.b * rows + transform.c
         y = transform.d * cols + transform.e * rows + transform.f
-        cut = {name: raster[..., window[0], window[1]] for name, raster in given.items()}
+        cut = {name: raster[..., window[0], window[1]].astype(float)
+               for name, raster in given.items()}
         valid = np.all([np.isfinite(v).all(axis=0) if v.ndim == 3 else np.isfinite(v)
                         for v in cut.values()], axis=0)
         inside = shapely.contains_xy(corridor, x, y) & valid
@@ -452,7 +467,8 @@ def gap_context(gaps: gpd.GeoDataFrame, *, transform: Affine, ndvi=None, ndsm=No
             tree_height_m=tree_height_m, vehicle_height_m=vehicle_height_m,
             shadow_intensity=shadow_intensity, bright_intensity=bright_intensity,
             grey_saturation=grey_saturation)
-        masks = {name: mask & valid for name, mask in masks.items()}
+        masks = {name: _majority(mask & valid, smooth_px) & valid
+                 for name, mask in masks.items()}
         buildings, vehicles, vehicle_mask = _raised_appearances(
             masks["raised"], cut.get("ndsm"), inside, min_pixels, pixel_m2,
             building_height_m=building_height_m, max_vehicle_m2=max_vehicle_m2)
@@ -684,6 +700,16 @@ def road_strings(road_parts: gpd.GeoDataFrame, gaps: gpd.GeoDataFrame) -> gpd.Ge
             "length_m": float(shapely.length(geometries[-1])), "n_parts": len(chain)})
     frame = pd.DataFrame.from_records(records).astype(_STRING_COLUMNS)
     return gpd.GeoDataFrame(frame, geometry=geometries, crs=road_parts.crs)
+
+
+def context_rasters(cues) -> dict:
+    """The rasters of :func:`gap_context` from a :class:`gisroads.imagery.cues.ImageCues`:
+    ``ndvi``, ``ndsm``, ``intensity``, and ``rgb`` (the first three non-NIR bands, taken as
+    red, green, blue) for an RGB image; panchromatic and CIR images have no ``rgb``."""
+    visible = [band for number, band in enumerate(cues.bands, start=1)
+               if number != cues.nir_band]
+    rgb = np.stack(visible[:3]) if cues.kind == "rgb" and len(visible) >= 3 else None
+    return {"ndvi": cues.ndvi, "ndsm": cues.ndsm, "intensity": cues.intensity, "rgb": rgb}
 
 
 def link_road_parts(road_parts: gpd.GeoDataFrame, *, transform: Affine | None = None,

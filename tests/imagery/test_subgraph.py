@@ -3,6 +3,7 @@ import geopandas as gpd
 import numpy as np
 import pytest
 import shapely
+import shapely.ops
 from affine import Affine
 
 from gisroads.imagery.subgraph import (edge_weights, gap_context, gap_edges, link_road_parts,
@@ -306,3 +307,99 @@ def test_bad_road_parts_are_refused():
         gap_edges(parts.set_geometry(parts.buffer(1.0)))
     assert len(gap_edges(parts.iloc[:0])) == 0
     assert len(road_strings(parts.iloc[:0], gap_edges(parts.iloc[:0]).assign(selected=[]))) == 0
+
+
+# --- a synthetic scene ----------------------------------------------------------------------
+
+BRANCH = -1000     # road_id of the false side branches
+
+
+@pytest.fixture(scope="module")
+def scene_parts():
+    """Road parts cut from the ground-level truth roads of a rendered synthetic scene (gaps
+    of 4-14 m, some under trees and cars), a false part branching off at 20 degrees in every
+    gap, and false pairs in line through every building."""
+    from gisroads.imagery.cues import image_cues
+    from gisroads.synthetic import make_scene, render_image
+    scene = make_scene(seed=3, size_m=(300, 300))
+    image, dsm = render_image(scene, pixel_m=0.5)
+    rng = np.random.default_rng(0)
+    rows = []
+    # the bridge road is left out: raised above the ground, its parts would not pass the
+    # road-part stage's nDSM test, and its deck reads as a building here
+    for road in scene.roads[scene.roads.level == 0].itertuples():
+        line = shapely.force_2d(road.geometry)
+        start, order = rng.uniform(0, 5), 0
+        while start < line.length - 10:
+            stop = min(line.length, start + rng.uniform(30, 50))
+            rows.append((road.road_id, order, road.width_m * rng.uniform(0.85, 1.1),
+                         rng.uniform(0.4, 0.9), shapely.ops.substring(line, start, stop)))
+            gap = rng.uniform(4, 14)
+            if stop + gap < line.length - 10:     # a false part branching off in the gap
+                end, inner = (np.asarray(line.interpolate(stop - d).coords[0]) for d in (0, 1))
+                ahead = (end - inner) / np.linalg.norm(end - inner)
+                side = np.array([-ahead[1], ahead[0]])
+                branch = COS20 * ahead + SIN20 * side
+                first = end + 0.8 * gap * ahead + 2.0 * side
+                rows.append((BRANCH, order, 6.0, 0.6,
+                             shapely.LineString([first, first + 25 * branch])))
+            start, order = stop + gap, order + 1
+    for building in scene.buildings.itertuples():
+        corners = np.asarray(building.geometry.minimum_rotated_rectangle.exterior.coords)
+        axis = max(np.diff(corners[:3], axis=0), key=np.linalg.norm)
+        half, along = np.linalg.norm(axis) / 2 + 1.0, axis / np.linalg.norm(axis)
+        middle = np.asarray(building.geometry.centroid.coords[0])
+        for side in (-1, 1):
+            rows.append((-1 - building.building_id, int(side > 0), 6.0, 0.6,
+                         shapely.LineString([middle + side * half * along,
+                                             middle + side * (half + 20) * along])))
+    parts = gpd.GeoDataFrame(
+        {"part_id": np.arange(len(rows)), "road_id": [r[0] for r in rows],
+         "order": [r[1] for r in rows], "width_m": [r[2] for r in rows],
+         "quality": [r[3] for r in rows]},
+        geometry=[r[4] for r in rows], crs=scene.crs)
+    return parts, image, dsm, image_cues
+
+
+def _score_links(parts, gaps):
+    """True links (consecutive parts of a road), false links (between roads, or a road and
+    a branch), links through a building (its two parts), and the number of road gaps."""
+    road = parts.set_index("part_id")
+    a, b = road.road_id.loc[gaps.from_part].values, road.road_id.loc[gaps.to_part].values
+    next_part = np.abs(road.order.loc[gaps.from_part].values
+                       - road.order.loc[gaps.to_part].values) == 1
+    true_link = (a == b) & (a >= 0) & next_part
+    false_link = ((a >= 0) & (b >= 0) & ~true_link) | (np.minimum(a, b) == BRANCH) & (
+        np.maximum(a, b) >= 0)
+    n_true = int((parts[parts.road_id >= 0].groupby("road_id").size() - 1).sum())
+    return true_link, false_link, (a == b) & (a < 0) & (a > BRANCH), n_true
+
+
+def test_synthetic_scene_links_road_gaps_and_rejects_links_through_buildings(scene_parts):
+    from gisroads.imagery.subgraph import context_rasters
+    parts, image, dsm, image_cues = scene_parts
+    cues = image_cues(image, nir_band=4, dsm=dsm)
+    gaps, strings = link_road_parts(parts, transform=image.transform, **context_rasters(cues))
+    true_link, false_link, through_building, n_true = _score_links(parts, gaps)
+    assert n_true == 31 and true_link.sum() == n_true          # every road gap hypothesised
+    assert gaps.selected[true_link].all()                      # ... and kept
+    assert false_link.sum() == 31 and not gaps.selected[false_link].any()  # branches lose
+    assert through_building.sum() == 37                        # one per building
+    assert (gaps.n_building[through_building] == 1).all()
+    assert (gaps.weight[through_building] == 0).all()
+    # gaps under trees and their shadows are kept through the occlusion share
+    assert (gaps.occlusion[true_link] > 0.5).sum() >= 5
+    assert (gaps.n_building[true_link] == 0).all()
+    assert len(strings) == len(parts) - gaps.selected.sum()
+
+
+def test_synthetic_scene_rgb_only_uses_colour_vegetation(scene_parts):
+    from gisroads.geo import GeoRaster
+    from gisroads.imagery.subgraph import context_rasters
+    parts, image, _, image_cues = scene_parts
+    rgb = image_cues(GeoRaster(image.data[:3], image.transform, image.crs))
+    gaps, _ = link_road_parts(parts, transform=image.transform, **context_rasters(rgb))
+    true_link, false_link, _, n_true = _score_links(parts, gaps)
+    assert gaps.context_cues.iloc[0] == "intensity,rgb"
+    assert gaps.selected[true_link].sum() == n_true and not gaps.selected[false_link].any()
+    assert (gaps.n_tree[true_link] > 0).sum() >= 5

@@ -1,0 +1,140 @@
+"""Subgraph linking (integer program): gap hypotheses between road parts, the best kept."""
+import numpy as np
+from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutputNumber,
+                       QgsProcessingParameterBand, QgsProcessingParameterFeatureSink,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber,
+                       QgsProcessingParameterRasterLayer)
+
+from gisroads.imagery.cues import image_cues, normalised_dsm
+from gisroads.imagery.subgraph import (MAX_DIRECTION_DIFF_RAD, MAX_GAP_M, MAX_GAP_RELATIVE,
+                                       MAX_LATERAL_OFFSET_M, SMALL_GAP_M, context_rasters,
+                                       link_road_parts)
+from gisroads.io.raster import read_raster
+
+from ..convert import (frame_to_sink, gisroads_errors, progress_callback, source_to_frame,
+                       style_on_load)
+from .base import GisroadsAlgorithm
+
+
+class SubgraphLinking(GisroadsAlgorithm):
+    NAME = "subgraphlinking"
+    DISPLAY_NAME = "Subgraph linking (integer program)"
+    GROUP = "Imagery"
+    HELP = (
+        "<p>Links road parts (centre lines from the road-part shape filtering) into road "
+        "strings, following Grote &amp; Rottensteiner (2010, Sec. 2.2).</p>"
+        "<p><b>Subgraph generation</b>: every pair of part ends that is close (absolutely "
+        "and relative to the parts' lengths), similar in direction and in smooth "
+        "continuation (small lateral offset) becomes a gap edge; one end may have several "
+        "competing gap edges. <b>Evaluation</b>: each gap edge gets a weight, the product "
+        "of linear weights of six features (smoothness, distance, direction difference, "
+        "the parts' quality, colour and width differences), combined with what lies in the "
+        "gap when rasters are given: a building there (from the DSM) rules the link out "
+        "(-10), trees, vehicles and shadow that hide the road support it (occlusion), "
+        "asphalt-like surface supports it, a lawn speaks against it; gaps shorter than the "
+        "small-gap length ignore their context. An integer program (PuLP) then keeps the "
+        "links of greatest total weight with at most one link per part end.</p>"
+        "<p>Outputs: <i>gap_edges</i>, every hypothesis with its features, context, weights "
+        "and <i>selected</i> (edit it and re-run the next stage to override), and "
+        "<i>road_strings</i>, the chained parts with length-weighted width and quality, "
+        "the input of junction construction.</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        double = QgsProcessingParameterNumber.Double
+        params = [
+            (QgsProcessingParameterFeatureSource("ROAD_PARTS", self.tr("Road parts"),
+                                                 [QgsProcessing.TypeVectorLine]),
+             "centre lines with part_id, width_m, quality and band means (mean_b1, ...), "
+             "in a projected CRS in metres"),
+            (QgsProcessingParameterRasterLayer("IMAGE", self.tr("Image (context)"),
+                                               optional=True),
+             "optional: the image the parts come from, for shadow, asphalt and (RGB) "
+             "vegetation in the gaps"),
+            (QgsProcessingParameterBand("NIR_BAND", self.tr("Near-infrared band"), None,
+                                        "IMAGE", optional=True),
+             "optional: the image's NIR band; vegetation then comes from the NDVI"),
+            (QgsProcessingParameterRasterLayer("DSM", self.tr("DSM (context)"),
+                                               optional=True),
+             "optional: surface heights in metres; buildings, vehicles and trees in the gaps "
+             "are found in its normalised heights"),
+            (QgsProcessingParameterNumber("MAX_GAP", self.tr("Largest gap (metres)"), double,
+                                          MAX_GAP_M, minValue=0.0),
+             "part ends further apart are never linked"),
+            (QgsProcessingParameterNumber("MAX_GAP_RELATIVE",
+                                          self.tr("Largest gap relative to the parts' lengths"),
+                                          double, MAX_GAP_RELATIVE, minValue=0.0),
+             "the gap may be at most this times the two parts' lengths together"),
+            (QgsProcessingParameterNumber("MAX_DIRECTION",
+                                          self.tr("Largest direction difference (degrees)"),
+                                          double, float(np.degrees(MAX_DIRECTION_DIFF_RAD)),
+                                          minValue=0.0, maxValue=180.0),
+             "0 for a straight continuation"),
+            (QgsProcessingParameterNumber("MAX_LATERAL",
+                                          self.tr("Largest lateral offset (metres)"), double,
+                                          MAX_LATERAL_OFFSET_M, minValue=0.0),
+             "continuation smoothness: how far an end may lie beside the other part's "
+             "extension"),
+            (QgsProcessingParameterNumber("SMALL_GAP",
+                                          self.tr("Small gap: context ignored below (metres)"),
+                                          double, SMALL_GAP_M, minValue=0.0),
+             "the context of shorter gaps is too small to judge"),
+            (QgsProcessingParameterFeatureSink("GAP_EDGES", self.tr("Gap edges"),
+                                               QgsProcessing.TypeVectorLine),
+             "every link hypothesis with features, context, weights and selected"),
+            (QgsProcessingParameterFeatureSink("ROAD_STRINGS", self.tr("Road strings"),
+                                               QgsProcessing.TypeVectorLine),
+             "road parts chained through the selected gap edges"),
+        ]
+        for param, text in params:
+            param.setHelp(self.tr(text))
+            self.addParameter(param)
+        self.addOutput(QgsProcessingOutputNumber("SELECTED", self.tr("Gap edges kept")))
+        self.addOutput(QgsProcessingOutputNumber("STRINGS", self.tr("Road strings")))
+
+    def _raster(self, parameters, name, context):
+        layer = self.parameterAsRasterLayer(parameters, name, context)
+        return None if layer is None else read_raster(layer.source())
+
+    def _context(self, parameters, context, crs):
+        """Keyword arguments of link_road_parts for the optional rasters."""
+        image = self._raster(parameters, "IMAGE", context)
+        dsm = self._raster(parameters, "DSM", context)
+        for raster, name in ((image, "image"), (dsm, "DSM")):
+            if raster is not None and None not in (raster.crs, crs) and raster.crs != crs:
+                raise QgsProcessingException(
+                    self.tr(f"the {name} is in another CRS than the road parts; reproject it"))
+        if image is None and dsm is None:
+            return {}
+        if image is None:
+            return {"transform": dsm.transform, "ndsm": normalised_dsm(dsm, dsm)}
+        nir = self.parameterAsInt(parameters, "NIR_BAND", context) or None
+        cues = image_cues(image, nir_band=nir, dsm=dsm)
+        return {"transform": image.transform, **context_rasters(cues)}
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        source = self.parameterAsSource(parameters, "ROAD_PARTS", context)
+        parts = source_to_frame(source, feedback)
+        with gisroads_errors():
+            rasters = self._context(parameters, context, parts.crs)
+            gaps, strings = link_road_parts(
+                parts, **rasters, progress=progress_callback(feedback),
+                gap_options={
+                    "max_gap_m": self.parameterAsDouble(parameters, "MAX_GAP", context),
+                    "max_gap_relative": self.parameterAsDouble(parameters, "MAX_GAP_RELATIVE",
+                                                               context),
+                    "max_direction_diff_rad": np.radians(
+                        self.parameterAsDouble(parameters, "MAX_DIRECTION", context)),
+                    "max_lateral_offset_m": self.parameterAsDouble(parameters, "MAX_LATERAL",
+                                                                   context)},
+                weight_options={"small_gap_m": self.parameterAsDouble(parameters, "SMALL_GAP",
+                                                                      context)})
+        outputs = {}
+        for param, layer, frame in (("GAP_EDGES", "gap_edges", gaps),
+                                    ("ROAD_STRINGS", "road_strings", strings)):
+            outputs[param] = frame_to_sink(self, parameters, param, context, frame,
+                                           "LineString", feedback)
+            style_on_load(context, outputs[param], layer)
+        selected = int(gaps["selected"].sum())
+        feedback.pushInfo(f"{len(gaps)} gap edges, {selected} kept; {len(strings)} road "
+                          "strings")
+        return {**outputs, "SELECTED": selected, "STRINGS": len(strings)}
