@@ -81,6 +81,10 @@ BORDER_M = 15.0
 #: An end that passes a crossing road by at most that road's half width plus this margin
 #: ends at the crossing (the overshoot is trimmed).
 OVERSHOOT_M = 2.0
+#: Width and quality of lines that carry none (:func:`road_strings_from_lines`): a
+#: two-lane suburban road, a middling string.
+DEFAULT_WIDTH_M = 6.0
+DEFAULT_QUALITY = 0.5
 #: Junctions joined by a road shorter than this are one junction: two ends extended onto
 #: each other's connections at a crossroads meet the crossing road at nearby points.
 JUNCTION_MERGE_M = 3.0
@@ -156,6 +160,28 @@ def approximate_strings(road_strings: gpd.GeoDataFrame, *,
         {"road_id": np.arange(len(lines), dtype=np.int64), "string_id": string_id[row],
          "width_m": width[row], "quality": quality[row], "length_m": shapely.length(lines)},
         geometry=gpd.GeoSeries(lines, crs=road_strings.crs), crs=road_strings.crs)
+
+
+def road_strings_from_lines(lines: gpd.GeoDataFrame, *, width_m: float = DEFAULT_WIDTH_M,
+                            quality: float = DEFAULT_QUALITY) -> gpd.GeoDataFrame:
+    """Any line layer as road strings: ``width_m`` and ``quality`` filled in where the
+    layer has no such column or a row has no value (e.g. centre lines digitised by hand).
+
+    Parameters
+    ----------
+    lines : GeoDataFrame
+        Lines; ``width_m`` (metres) and ``quality`` (0..1) are used where present.
+    width_m : float
+        Metres, for rows without a width.
+    quality : float
+        0..1, for rows without a quality.
+    """
+    frame = lines.copy()
+    for column, default in (("width_m", width_m), ("quality", quality)):
+        values = (pd.to_numeric(frame[column], errors="coerce") if column in frame
+                  else pd.Series(np.nan, index=frame.index))
+        frame[column] = values.fillna(default).astype(float)
+    return frame
 
 
 def road_regions(roads: gpd.GeoDataFrame) -> np.ndarray:

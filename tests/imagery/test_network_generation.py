@@ -11,7 +11,8 @@ from gisroads.evaluate import evaluate_network
 from gisroads.geo import line_end_degrees
 from gisroads.imagery.network import (approximate_strings, find_junctions,
                                       merge_close_junctions, remove_duplicates, road_regions,
-                                      significant_components, strings_to_network)
+                                      road_strings_from_lines, significant_components,
+                                      strings_to_network)
 from gisroads.progress import Cancelled
 from gisroads.synthetic import make_scene
 
@@ -76,6 +77,14 @@ def test_bad_road_strings_are_refused(change, message):
     frame = change(strings([LineString([(500000, 4500000), (500050, 4500000)])]))
     with pytest.raises(ValueError, match=message):
         approximate_strings(frame)
+
+
+def test_plain_lines_get_default_width_and_quality_where_they_have_none():
+    lines = gpd.GeoDataFrame({"width_m": [8.0, None]},
+                             geometry=[LineString([(0, 0), (9, 0)])] * 2, crs=UTM)
+    frame = road_strings_from_lines(lines, width_m=5.0, quality=0.3)
+    assert frame["width_m"].tolist() == [8.0, 5.0] and frame["quality"].tolist() == [0.3] * 2
+    assert approximate_strings(frame)["string_id"].tolist() == [0, 1]
 
 
 def test_road_regions_cover_the_width_with_flat_caps():

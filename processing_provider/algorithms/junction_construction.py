@@ -1,0 +1,136 @@
+"""Junction construction and network generation: road strings to the road-network GeoPackage."""
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterExtent,
+                       QgsProcessingParameterFeatureSource,
+                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber)
+
+from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
+from gisroads.imagery.network import (BORDER_M, COLLINEAR_DEG, DEFAULT_QUALITY,
+                                      DEFAULT_WIDTH_M, MAX_SEARCH_RADIUS_M,
+                                      MIN_SEARCH_RADIUS_M, MIN_TOTAL_LENGTH_M, OVERLAP_SHARE,
+                                      TOLERANCE_M, road_strings_from_lines,
+                                      strings_to_network)
+from gisroads.io.vector import write_geopackage
+
+from ..convert import (gisroads_errors, load_geopackage_on_completion, progress_callback,
+                       source_to_frame)
+from .base import GisroadsAlgorithm
+
+CONNECTIONS = "junction_connections"
+
+
+class JunctionConstruction(GisroadsAlgorithm):
+    NAME = "junctionconstruction"
+    DISPLAY_NAME = "Junction construction and network generation"
+    GROUP = "Imagery"
+    HELP = (
+        "<p>Connects road strings (the output of subgraph linking, or any line layer) into "
+        "a road network, following Grote &amp; Rottensteiner (2010, Sec. 2.3).</p>"
+        "<p>Each string's centre line is approximated by a polygon (Douglas-Peucker) and "
+        "carries its average width. Of two close parallel roads the better one is kept; "
+        "roads mostly covered by other roads are deleted. A semicircle ahead of each road "
+        "end, larger for better roads, is searched for other roads: collinear roads "
+        "pointing at each other are joined end to end, others where the end's extension "
+        "meets the other road, or by the short polygon through the intersection of both "
+        "extensions; crossing roads meet where they cross. Each road end keeps one "
+        "junction connection, the shortest (continuations first). Connected components "
+        "whose junction connections are longer than their roads, or which are shorter than "
+        "the minimum length, are dropped, unless two of their open ends lie near the "
+        "border of the given extent.</p>"
+        "<p>Input fields <i>width_m</i> (metres) and <i>quality</i> (0..1) are used when "
+        "present, the defaults below otherwise. Output: a GeoPackage with road_centrelines "
+        "(split at junctions, width_m, score = quality), road_polygons, junctions and "
+        "junction_connections (every hypothesis with its kind and whether it was "
+        "verified and kept).</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        double = QgsProcessingParameterNumber.Double
+        params = [
+            (QgsProcessingParameterFeatureSource("ROAD_STRINGS", self.tr("Road strings"),
+                                                 [QgsProcessing.TypeVectorLine]),
+             "road centre lines in a projected CRS in metres, optionally with width_m and "
+             "quality fields"),
+            (QgsProcessingParameterExtent("EXTENT", self.tr("Image extent"), optional=True),
+             "optional: the extent of the image the strings come from; components reaching "
+             "its border with two open ends are kept however short"),
+            (QgsProcessingParameterNumber("DEFAULT_WIDTH",
+                                          self.tr("Width where none is given (metres)"),
+                                          double, DEFAULT_WIDTH_M, minValue=0.1),
+             "used for lines without a width_m value"),
+            (QgsProcessingParameterNumber("DEFAULT_QUALITY",
+                                          self.tr("Quality where none is given (0-1)"),
+                                          double, DEFAULT_QUALITY, minValue=0.0,
+                                          maxValue=1.0),
+             "used for lines without a quality value; sets their search radius"),
+            (QgsProcessingParameterNumber("TOLERANCE",
+                                          self.tr("Polygon approximation tolerance (metres)"),
+                                          double, TOLERANCE_M, minValue=0.0),
+             "largest distance of a string's vertices from its approximated centre line"),
+            (QgsProcessingParameterNumber("MIN_RADIUS",
+                                          self.tr("Search radius at quality 0 (metres)"),
+                                          double, MIN_SEARCH_RADIUS_M, minValue=0.1),
+             "radius of the semicircle searched ahead of a road end of the worst quality"),
+            (QgsProcessingParameterNumber("MAX_RADIUS",
+                                          self.tr("Search radius at quality 1 (metres)"),
+                                          double, MAX_SEARCH_RADIUS_M, minValue=0.1),
+             "radius for the best roads; linear in quality in between"),
+            (QgsProcessingParameterNumber("COLLINEAR",
+                                          self.tr("Collinear roads: largest direction "
+                                                  "difference (degrees)"),
+                                          double, COLLINEAR_DEG, minValue=0.0, maxValue=89.0),
+             "roads closer in direction are joined end to end, never through an "
+             "intersection"),
+            (QgsProcessingParameterNumber("OVERLAP", self.tr("Overlap share that deletes a "
+                                                             "road"),
+                                          double, OVERLAP_SHARE, minValue=0.0, maxValue=1.0),
+             "a road whose area is covered by other roads for more than this share goes"),
+            (QgsProcessingParameterNumber("MIN_LENGTH",
+                                          self.tr("Minimum length of a component (metres)"),
+                                          double, MIN_TOTAL_LENGTH_M, minValue=0.0),
+             "shorter isolated networks (roads and junction connections) are dropped"),
+            (QgsProcessingParameterNumber("BORDER", self.tr("Near the border (metres)"),
+                                          double, BORDER_M, minValue=0.0),
+             "open ends this close to the extent's border count as leaving the image"),
+            (QgsProcessingParameterFileDestination("OUTPUT", self.tr("Road network"),
+                                                   "GeoPackage (*.gpkg)"),
+             "GeoPackage receiving road_centrelines, road_polygons, junctions and "
+             "junction_connections"),
+        ]
+        for param, text in params:
+            param.setHelp(self.tr(text))
+            self.addParameter(param)
+        for name, text in (("ROADS", "number of roads"), ("LENGTH_M", "total road length"),
+                           ("JUNCTIONS", "number of junctions"),
+                           ("CONNECTIONS", "junction connections kept")):
+            self.addOutput(QgsProcessingOutputNumber(name, self.tr(text)))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        source = self.parameterAsSource(parameters, "ROAD_STRINGS", context)
+        lines = source_to_frame(source, feedback)
+        extent = None
+        if parameters.get("EXTENT") not in (None, ""):
+            box = self.parameterAsExtent(parameters, "EXTENT", context, source.sourceCrs())
+            extent = (box.xMinimum(), box.yMinimum(), box.xMaximum(), box.yMaximum())
+        out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
+
+        def number(name):
+            return self.parameterAsDouble(parameters, name, context)
+
+        with gisroads_errors():
+            road_strings = road_strings_from_lines(lines, width_m=number("DEFAULT_WIDTH"),
+                                                   quality=number("DEFAULT_QUALITY"))
+            network, connections = strings_to_network(
+                road_strings, extent=extent, tolerance_m=number("TOLERANCE"),
+                min_search_radius_m=number("MIN_RADIUS"),
+                max_search_radius_m=number("MAX_RADIUS"), collinear_deg=number("COLLINEAR"),
+                overlap_share=number("OVERLAP"), min_total_length_m=number("MIN_LENGTH"),
+                border_m=number("BORDER"), progress=progress_callback(feedback))
+            write_geopackage(out, network.layers())
+        load_geopackage_on_completion(context, out, (POLYGONS, CONNECTIONS, CENTRELINES,
+                                                     JUNCTIONS), group="roads")
+        kept = int((connections["verified"] & connections["significant"]).sum())
+        result = {"ROADS": len(network.centrelines),
+                  "LENGTH_M": float(network.centrelines["length_m"].sum()),
+                  "JUNCTIONS": len(network.junctions), "CONNECTIONS": kept}
+        feedback.pushInfo(f"{result['ROADS']} roads, {result['LENGTH_M']:.0f} m, "
+                          f"{result['JUNCTIONS']} junctions, {kept} junction connections")
+        return {"OUTPUT": out, **result}
