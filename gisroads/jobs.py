@@ -287,6 +287,53 @@ def _ground_points_xy(cloud_path, crs, spacing_m: float):
     return ground if len(ground) else np.concatenate(every)
 
 
+def register_job(cloud_path, map_source, out_path, *, progress: Progress = None,
+                 **options) -> dict:
+    """Register a 2D road map onto a LAS/LAZ cloud (Boyko & Funkhouser, section 2.1).
+
+    ``map_source``: a line file (a GeoPackage's road_centrelines layer, else its first;
+    GeoJSON, any OGR format) or a GeoDataFrame, in any CRS: reprojected to the cloud's.
+    Only the points near the map's lines are read, chunk by chunk. Writes the
+    ``registered_map`` layer (LineString Z, elevations in metres) to ``out_path`` in the
+    cloud's CRS. ``options`` go to :func:`gisroads.snakes.registration.register_map`.
+    """
+    import shapely
+
+    from .io.las import cloud_crs
+    from .snakes.registration import SNAP_M, SUPPORT_RADIUS_M, register_map
+    from .snakes.subclouds import read_corridor
+
+    working, source_crs = cloud_crs(cloud_path)
+    lines = map_source if isinstance(map_source, gpd.GeoDataFrame) else read_layer(map_source)
+    lines = lines[lines.geometry.notna() & ~lines.geometry.is_empty]
+    if len(lines) == 0:
+        raise ValueError(f"{map_source}: the map holds no line")
+    if working is not None:
+        if lines.crs is None:
+            raise ValueError(f"{map_source}: the map has no CRS; cannot match it to the cloud")
+        lines = lines.to_crs(working)
+    report(progress, 0.0, "reading the points along the map")
+    # Intersections move line ends by up to the snapping tolerance: read that much wider.
+    reach = (options.get("support_radius_m", SUPPORT_RADIUS_M)
+             + options.get("snap_m", SNAP_M) + 0.5)
+    along = shapely.get_coordinates(shapely.segmentize(lines.geometry.values, 0.5))
+    cloud, _ = read_corridor(cloud_path, along, reach)
+    if len(cloud) == 0:
+        raise ValueError(f"{cloud_path}: no point lies along the map's lines; "
+                         "does the map cover the cloud?")
+    registered = register_map(lines, cloud, progress=scaled(progress, 0.5, 0.95), **options)
+    out = registered.lines
+    if source_crs is not None and working is not None and source_crs != working:
+        out = out.to_crs(source_crs)
+    write_geopackage(out_path, {"registered_map": out})
+    report(progress, 1.0, "done")
+    return {"gpkg": Path(out_path), "roads": len(out),
+            "length_m": float(out["length_m"].sum()),
+            "intersections": len(registered.intersections),
+            "seen_fraction": float(registered.seen.mean()),
+            "points_read": len(cloud)}
+
+
 def demo_job(out_dir, *, seed: int = 0, progress: Progress = None) -> dict:
     """The demo: a synthetic scene, its truth, a degraded copy scored against it, a PNG.
 

@@ -26,6 +26,10 @@ from scipy.spatial import cKDTree
 from ..io.las import PointCloud
 from ..progress import Progress, report
 
+SNAP_M = 2.0
+"""Default snapping tolerance of the map's intersections (metres)."""
+SUPPORT_RADIUS_M = 0.15
+"""Radius of the points fitted by each sample (paper: 15 cm)."""
 TENSION = 0.0
 """Cardinal spline tension c: tangents (1 - c)(z[i+1] - z[i-1]) / 2 (0: Catmull-Rom)."""
 SIGMA_FLOOR_M = 0.05
@@ -127,7 +131,7 @@ def _cluster(points: np.ndarray, radius_m: float) -> np.ndarray:
     return connected_components(graph, directed=False)[1]
 
 
-def map_topology(lines: gpd.GeoDataFrame, *, snap_m: float = 2.0) -> MapTopology:
+def map_topology(lines: gpd.GeoDataFrame, *, snap_m: float = SNAP_M) -> MapTopology:
     """Intersections and roads of a road map given as lines.
 
     Intersections are (a) line end points within ``snap_m`` of each other, merged at their
@@ -397,8 +401,8 @@ def _clamp_inclines(road_id, station, z, max_incline: float) -> np.ndarray:
 
 
 def register_map(lines: gpd.GeoDataFrame, cloud: PointCloud, *, control_spacing_m: float = 15.0,
-                 sample_spacing_m: float = 1.0, support_radius_m: float = 0.15,
-                 max_incline: float = 0.35, snap_m: float = 2.0,
+                 sample_spacing_m: float = 1.0, support_radius_m: float = SUPPORT_RADIUS_M,
+                 max_incline: float = 0.35, snap_m: float = SNAP_M,
                  progress: Progress = None) -> RegisteredMap:
     """Register a 2D road map onto a point cloud: 3D centre lines on the road surface.
 

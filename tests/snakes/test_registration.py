@@ -154,3 +154,32 @@ def test_topology_of_the_shifted_scene_map(registered_scene):
         at = np.concatenate([first[lines.start_node.to_numpy() == node],
                              last[lines.end_node.to_numpy() == node]])
         assert np.ptp(reg.xyz[at, 2]) <= 0.36  # the same spline value, then one clamped step
+
+
+def test_register_job_reprojects_the_map_and_writes_the_layer(tmp_path):
+    from gisroads.io.las import cloud_crs
+    from gisroads.io.vector import list_layers, read_layer
+    from gisroads.jobs import register_job
+    from gisroads.synthetic import write_cloud
+
+    scene = make_scene(seed=3, size_m=(300.0, 300.0), features=("bridge",))
+    write_cloud(scene, tmp_path / "cloud.laz", density_per_m2=3.0, seed=0)
+    shifted = perturb_lines(scene.truth_edges, shift_m=2.0, jitter_m=0.2, seed=0)
+    result = register_job(tmp_path / "cloud.laz", shifted.to_crs("EPSG:4326"),
+                          tmp_path / "out.gpkg", snap_m=6.0, support_radius_m=0.3)
+    assert list_layers(tmp_path / "out.gpkg") == ["registered_map"]
+    lines = read_layer(tmp_path / "out.gpkg")
+    assert lines.crs == cloud_crs(tmp_path / "cloud.laz")[1]
+    assert result["roads"] == len(lines) and result["points_read"] > 1000
+    xyz = shapely.get_coordinates(lines.geometry.values, include_z=True)
+    off_bridge = ~np.isin(lines["map_road_id"].to_numpy()[shapely.get_coordinates(
+        lines.geometry.values, return_index=True)[1]], scene.bridges["road_id"].to_numpy())
+    dz = np.abs(xyz[off_bridge, 2] - scene.ground_z(xyz[off_bridge, 0], xyz[off_bridge, 1]))
+    assert np.percentile(dz, 95) <= 0.10
+    with pytest.raises(ValueError, match="no CRS"):
+        register_job(tmp_path / "cloud.laz",
+                     gpd.GeoDataFrame(geometry=list(shifted.geometry.values)),
+                     tmp_path / "bad.gpkg")
+    with pytest.raises(ValueError, match="no line"):
+        register_job(tmp_path / "cloud.laz", shifted.iloc[:0], tmp_path / "bad.gpkg")
+    assert not (tmp_path / "bad.gpkg").exists()
