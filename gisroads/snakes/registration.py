@@ -25,6 +25,7 @@ from scipy.spatial import cKDTree
 
 from ..io.las import PointCloud
 from ..progress import Progress, report
+from .buckets import GridBuckets
 
 SNAP_M = 2.0
 """Default snapping tolerance of the map's intersections (metres)."""
@@ -472,8 +473,11 @@ def register_map(lines: gpd.GeoDataFrame, cloud: PointCloud, *, control_spacing_
     samples = _sample_roads(topology, control_spacing_m, sample_spacing_m)
     n = len(samples.station_m)
     report(progress, 0.1, f"finding the points near {n} samples")
-    tree = cKDTree(cloud.xyz[:, :2])
-    sample, point = _neighbours(tree, samples.xy, support_radius_m)
+    # Only the points in the grid cells around the samples go into the k-d tree.
+    near = np.flatnonzero(GridBuckets(samples.xy, np.zeros(n, np.int64), support_radius_m)
+                          .in_corridor(cloud.xyz[:, :2]))
+    sample, point = _neighbours(cKDTree(cloud.xyz[near, :2]), samples.xy, support_radius_m)
+    point = near[point]
     z = cloud.xyz[point, 2]
 
     report(progress, 0.4, "separating levels")

@@ -1,0 +1,100 @@
+"""Grid buckets over a map's corridor: the points of a cloud near a road map, chunk by chunk.
+
+The paper's out-of-core spatial index stores the points in blocks of a regular 2D grid;
+here a chunk's points are hashed to the cells of such a grid, and only the cells near the
+map's samples are kept, so a file of any size is streamed through a small working set.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..io.las import DEFAULT_CHUNK, PointCloud, concatenate, iter_las_chunks, subset
+
+
+def iter_source(source, *, chunk_size: int = DEFAULT_CHUNK) -> Iterator[tuple[int, PointCloud]]:
+    """``(offset of the chunk's first point, chunk)`` of a PointCloud or a LAS/LAZ path."""
+    if chunk_size <= 0:
+        raise ValueError(f"chunk_size must be positive, got {chunk_size}")
+    if isinstance(source, PointCloud):
+        for start in range(0, len(source), chunk_size):
+            yield start, subset(source, slice(start, start + chunk_size))
+        return
+    if not isinstance(source, (str, Path)):
+        raise ValueError(f"source must be a PointCloud or a LAS/LAZ path, got {type(source)}")
+    offset = 0
+    for chunk in iter_las_chunks(source, chunk_size=chunk_size):
+        yield offset, chunk
+        offset += len(chunk)
+
+
+class GridBuckets:
+    """Square grid cells around groups of sample points, to fetch a chunk's nearby points.
+
+    Parameters
+    ----------
+    xy : ndarray, shape (n, 2)
+        Sample positions (metres).
+    group : ndarray of int, shape (n,)
+        Group (road) of each sample.
+    reach_m : float
+        Points within this distance of a group's samples are in its cells: the cell side,
+        and one ring of cells is added around each sample's cell.
+    """
+
+    def __init__(self, xy: np.ndarray, group: np.ndarray, reach_m: float):
+        self.cell_m = float(reach_m)
+        cells = np.floor(np.asarray(xy) / self.cell_m).astype(np.int64)
+        ring = np.array([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)])
+        near = (cells[:, None, :] + ring[None]).reshape(-1, 2)
+        keys = self._key(near)
+        groups = np.repeat(np.asarray(group), len(ring))
+        self.cells = {int(g): np.unique(keys[groups == g]) for g in np.unique(groups)}
+        self.corridor = np.unique(keys)
+
+    @staticmethod
+    def _key(cells: np.ndarray) -> np.ndarray:
+        return (cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF)
+
+    def keys(self, xy: np.ndarray) -> np.ndarray:
+        """Cell key of each point."""
+        return self._key(np.floor(xy / self.cell_m).astype(np.int64))
+
+    def in_corridor(self, xy: np.ndarray) -> np.ndarray:
+        """Which points fall in any group's cells."""
+        return np.isin(self.keys(xy), self.corridor)
+
+    def members(self, sorted_keys: np.ndarray, group: int) -> np.ndarray:
+        """Positions, in an array of point keys sorted ascending, of the group's points."""
+        cells = self.cells[group]
+        lo = np.searchsorted(sorted_keys, cells, "left")
+        hi = np.searchsorted(sorted_keys, cells, "right")
+        lengths = hi - lo
+        starts = np.repeat(lo - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
+        return starts + np.arange(int(lengths.sum()))
+
+
+def read_corridor(source, xy: np.ndarray, radius_m: float, *,
+                  chunk_size: int = DEFAULT_CHUNK) -> tuple[PointCloud, np.ndarray]:
+    """The points of a source within ``radius_m`` (XY) of any of the positions ``xy``.
+
+    Returns
+    -------
+    cloud : PointCloud
+    point_index : ndarray of int64
+        Position of each point in the source.
+    """
+    xy = np.asarray(xy, float)
+    index = GridBuckets(xy, np.zeros(len(xy), np.int64), radius_m)
+    tree = cKDTree(xy)
+    parts, indices = [], []
+    for offset, chunk in iter_source(source, chunk_size=chunk_size):
+        candidate = np.flatnonzero(index.in_corridor(chunk.xyz[:, :2]))
+        distance, _ = tree.query(chunk.xyz[candidate, :2], distance_upper_bound=radius_m)
+        keep = candidate[np.isfinite(distance)]
+        parts.append(subset(chunk, keep))
+        indices.append(offset + keep)
+    return concatenate(parts), np.concatenate(indices).astype(np.int64)
