@@ -183,3 +183,27 @@ def test_register_job_reprojects_the_map_and_writes_the_layer(tmp_path):
     with pytest.raises(ValueError, match="no line"):
         register_job(tmp_path / "cloud.laz", shifted.iloc[:0], tmp_path / "bad.gpkg")
     assert not (tmp_path / "bad.gpkg").exists()
+
+
+def test_real_cloud_fusa_with_a_shifted_digitised_map(lidar_dir):
+    from scipy.spatial import cKDTree
+
+    from gisroads.io.las import read_las
+    from gisroads.io.vector import read_layer
+
+    cloud = read_las(lidar_dir / "fusa.laz")
+    truth = read_layer(lidar_dir / "ground_truth" / "fusa" / "centrelines.geojson",
+                       crs=cloud.crs)
+    shifted = perturb_lines(truth, shift_m=3.0, jitter_m=0.3, seed=0)
+    reg = register_map(shifted, cloud, snap_m=8.0)
+    assert (reg.intersections["degree"] >= 3).sum() >= 5  # the truth has 7 junctions
+    # Reference: the median of the ground-class points within 0.6 m of each sample.
+    ground = cloud.classification == 2
+    near = cKDTree(cloud.xyz[ground, :2]).query_ball_point(reg.xyz[:, :2], 0.6)
+    z = cloud.xyz[ground, 2]
+    reference = np.array([np.median(z[i]) if len(i) >= 2 else np.nan for i in near])
+    error = np.abs(reg.xyz[:, 2] - reference)
+    checked = reg.seen & np.isfinite(error)
+    assert checked.sum() > 250  # 4.4 points/m2: one sample in three sees a point
+    assert np.percentile(error[checked], 95) <= 0.10
+    assert np.nanpercentile(error, 95) <= 0.20
