@@ -258,8 +258,9 @@ def gap_edges(road_parts: gpd.GeoDataFrame, *, max_gap_m: float = MAX_GAP_M,
     lines = road_parts.geometry.values
     xy, outward = _part_ends(lines, end_window_m)
     length = shapely.length(lines)
-    i, j = np.triu_indices(2 * n, k=1)
-    i, j = i[i // 2 != j // 2], j[i // 2 != j // 2]
+    points = shapely.points(xy)
+    i, j = shapely.STRtree(points).query(points, predicate="dwithin", distance=max_gap_m)
+    i, j = i[(i < j) & (i // 2 != j // 2)], j[(i < j) & (i // 2 != j // 2)]
     d = xy[j] - xy[i]
     distance = np.hypot(d[:, 0], d[:, 1])
     ahead_i = np.einsum("ij,ij->i", d, outward[i])
@@ -540,11 +541,12 @@ def edge_weights(gaps: gpd.GeoDataFrame, *, weight_ranges: dict | None = None,
         relation *= linear_weight(features[name], good, bad)
     if "occlusion" in gaps:
         context = gaps["occlusion"].to_numpy(float).copy()
-        for kind, value in values.items():
-            appearances = gaps[f"n_{kind}"].to_numpy(float)
-            harmonic = np.array([np.sum(1.0 / np.arange(1, a + 1)) if a > 0 else 0.0
-                                 for a in np.nan_to_num(appearances).astype(int)])
-            context += value * harmonic
+        appearances = np.nan_to_num(
+            gaps[[f"n_{kind}" for kind in values]].to_numpy(float)).astype(np.int64)
+        # sum_{m=1..a} 1 / m, the harmonic number of a (0 for no appearance)
+        harmonic = np.concatenate([[0.0], np.cumsum(1.0 / np.arange(1, appearances.max(
+            initial=0) + 1))])[appearances]
+        context += harmonic @ np.array(list(values.values()))
     else:
         context = np.full(len(gaps), np.nan)
     ignored = np.isnan(context) | (gaps["distance_m"].to_numpy(float) < small_gap_m)
@@ -660,6 +662,8 @@ def road_strings(road_parts: gpd.GeoDataFrame, gaps: gpd.GeoDataFrame) -> gpd.Ge
         link[a], link[b] = b, a
     lines = road_parts.geometry.values
     part_length = shapely.length(lines)
+    width = road_parts["width_m"].to_numpy(float)
+    quality = road_parts["quality"].to_numpy(float)
     visited = np.zeros(len(ids), dtype=bool)
 
     def walk(part: int, entry: int) -> list[tuple[int, int]]:
@@ -693,10 +697,8 @@ def road_strings(road_parts: gpd.GeoDataFrame, gaps: gpd.GeoDataFrame) -> gpd.Ge
         weights = part_length[parts]
         records.append({
             "string_id": string_id, "part_ids": ",".join(str(i) for i in ids[parts]),
-            "width_m": float(np.average(road_parts["width_m"].to_numpy(float)[parts],
-                                        weights=weights)),
-            "quality": float(np.average(road_parts["quality"].to_numpy(float)[parts],
-                                        weights=weights)),
+            "width_m": float(np.average(width[parts], weights=weights)),
+            "quality": float(np.average(quality[parts], weights=weights)),
             "length_m": float(shapely.length(geometries[-1])), "n_parts": len(chain)})
     frame = pd.DataFrame.from_records(records).astype(_STRING_COLUMNS)
     return gpd.GeoDataFrame(frame, geometry=geometries, crs=road_parts.crs)

@@ -60,20 +60,30 @@ def test_collinear_link_kept_branch_rejected_and_styled(qgis_process, qgis_app, 
     assert styles == {True: "solid", False: "dash"}
 
 
-def test_a_building_in_the_dsm_blocks_the_gap(qgis_process, tmp_path):
+def test_a_building_in_the_dsm_blocks_the_gap_a_tree_does_not(qgis_process, tmp_path):
     parts = write_parts(tmp_path / "parts.gpkg", [
         (1, [(0, 0), (40, 0)], 6.0, 0.9), (2, [(60, 0), (100, 0)], 6.0, 0.9),
         (3, [(0, 100), (40, 100)], 6.0, 0.9), (4, [(60, 100), (100, 100)], 6.0, 0.9)])
-    heights = np.full((140, 120), 50.0, np.float32)    # ground 50 m, x -10..110, y -20..120
-    heights[120 - 5:120 + 5, 45 + 10:55 + 10] = 58.0   # an 8 m building in the gap at y = 0
-    write_geotiff(tmp_path / "dsm.tif",
-                  GeoRaster(heights, Affine(1, 0, -10, 0, -1, 120), CRS(EPSG)))
+    grid = Affine(1, 0, -10, 0, -1, 120)               # x -10..110, y -20..120
+    heights = np.full((140, 120), 50.0, np.float32)    # ground at 50 m
+    heights[115:125, 55:65] = 58.0                     # an 8 m building in the gap at y = 0
+    heights[15:25, 55:65] = 59.0                       # a 9 m tree in the gap at y = 100
+    noise = np.random.default_rng(0).integers(-3, 4, (1, 140, 120))
+    image = (np.array([120, 120, 120, 80])[:, None, None] + noise).astype(np.uint8)  # asphalt
+    image[:, 60:70], image[:, 70:80] = 20, 230   # dark and bright strips away from the gaps
+    image[:, 15:25, 55:65] = np.array([60, 120, 60, 220], np.uint8)[:, None, None]  # a tree
+    write_geotiff(tmp_path / "dsm.tif", GeoRaster(heights, grid, CRS(EPSG)))
+    write_geotiff(tmp_path / "image.tif", GeoRaster(image, grid, CRS(EPSG)))
     qgis_process.run("subgraphlinking", ROAD_PARTS=parts, DSM=tmp_path / "dsm.tif",
+                     IMAGE=tmp_path / "image.tif", NIR_BAND=4,
                      GAP_EDGES=tmp_path / "gaps.gpkg", ROAD_STRINGS=tmp_path / "strings.gpkg")
     gaps = gpd.read_file(tmp_path / "gaps.gpkg")
-    assert list(zip(gaps.from_part, gaps.to_part, gaps.n_building, gaps.selected)) == [
-        (1, 2, 1, False), (3, 4, 0, True)]
-    assert gaps.context_weight.tolist()[0] == -10.0
+    assert list(zip(gaps.from_part, gaps.to_part, gaps.n_building, gaps.n_tree,
+                    gaps.selected)) == [(1, 2, 1, 0, False), (3, 4, 0, 1, True)]
+    # asphalt on both sides of the building, around the tree: two appearances each
+    assert gaps.n_asphalt.tolist() == [2, 2] and gaps.occlusion.tolist() == [0.0, 0.5]
+    assert gaps.context_weight.tolist() == [-10 + 0.75, 0.75 + 0.5]
+    assert gaps.context_cues[0] == "ndvi,ndsm,intensity,rgb"
     strings = gpd.read_file(tmp_path / "strings.gpkg")
     assert sorted(strings.part_ids) == ["1", "2", "3,4"]
 
