@@ -18,7 +18,8 @@ constancy, length and NDVI (the subgraph stage starts from the best part).
 Stages, each callable alone: :func:`measure_segments` (one polygon per segment with every
 attribute and its centre line), :func:`filter_road_parts` (``passed``, ``reason``,
 ``quality`` and the ``road_parts`` line layer), :func:`merge_adjacent_parts`;
-:func:`extract_road_parts` composes them.
+:func:`extract_road_parts` composes them. :func:`rasterize_segments` turns segment polygons
+(e.g. edited in QGIS) back into the label image they all take.
 
 Centre line
     The segments' interiors (segment pixels whose four neighbours belong to the same
@@ -572,6 +573,40 @@ def _road_part_layer(segments: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
     return gpd.GeoDataFrame(frame, geometry=gpd.GeoSeries(parts["centreline"].to_numpy(),
                                                          crs=segments.crs),
                             crs=segments.crs)
+
+
+def rasterize_segments(segments: gpd.GeoDataFrame, like: GeoRaster, *,
+                       id_column: str = "segment_id") -> np.ndarray:
+    """Segment polygons (from the segmentation stage or edited by hand) as a label image.
+
+    Parameters
+    ----------
+    segments : GeoDataFrame
+        Polygons with non-negative integer ids in ``id_column``, in ``like``'s CRS; where
+        polygons overlap, the later one wins.
+    like : GeoRaster
+        The grid to burn into.
+    id_column : str
+
+    Returns
+    -------
+    ndarray of int32, ``like.shape``; -1 outside every polygon.
+    """
+    if id_column not in segments:
+        raise ValueError(f"the segments have no {id_column!r} field")
+    ids = pd.to_numeric(segments[id_column], errors="coerce").to_numpy(float)
+    if len(ids) and (np.isnan(ids).any() or (ids < 0).any() or (ids != np.round(ids)).any()
+                     or ids.max() >= np.iinfo(np.int32).max):
+        raise ValueError(f"{id_column} must hold non-negative integers")
+    crs = None if like.crs is None else CRS.from_user_input(like.crs)
+    if segments.crs is not None and crs is not None and CRS.from_user_input(segments.crs) != crs:
+        raise ValueError("the segments are in another CRS than the image; reproject them")
+    shapes = [(g, int(i)) for g, i in zip(segments.geometry.values, ids)
+              if g is not None and not g.is_empty]
+    if not shapes:
+        return np.full(like.shape, -1, np.int32)
+    return rasterio.features.rasterize(shapes, out_shape=like.shape, transform=like.transform,
+                                       fill=-1, dtype="int32")
 
 
 def _adjacent_pairs(labels: np.ndarray) -> np.ndarray:

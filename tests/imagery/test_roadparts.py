@@ -1,5 +1,6 @@
 import time
 
+import geopandas as gpd
 import numpy as np
 import pandas as pd
 import pytest
@@ -11,7 +12,8 @@ from skimage.measure import label as connected_regions
 from gisroads.geo import GeoRaster
 from gisroads.imagery.cues import image_cues
 from gisroads.imagery.roadparts import (extract_road_parts, filter_road_parts,
-                                        measure_segments, merge_adjacent_parts)
+                                        measure_segments, merge_adjacent_parts,
+                                        rasterize_segments)
 from gisroads.synthetic import make_scene, render_image
 
 PX = 0.25
@@ -252,3 +254,17 @@ def test_perfect_segments_of_a_synthetic_scene():
     assert shares["rgb"][0] >= 0.45
     assert shares["rgb"][1] >= 0.9 and shares["rgb+nir+dsm"][1] == 1.0
     assert shares["rgb+nir+dsm"][0] >= 0.3
+
+
+def test_segment_polygons_back_to_labels():
+    _, road = _strip(75, 75, 8.0, 120.0, 30.0)
+    labels, image = _paint([(road, ASPHALT)])
+    frame = gpd.GeoDataFrame({"segment_id": [5]}, geometry=[road], crs=CRS)
+    burnt = rasterize_segments(frame, image)
+    np.testing.assert_array_equal(burnt, np.where(labels == 1, 5, -1))
+    with pytest.raises(ValueError, match="non-negative integers"):
+        rasterize_segments(frame.assign(segment_id=[-2]), image)
+    with pytest.raises(ValueError, match="no 'segment_id' field"):
+        rasterize_segments(frame.rename(columns={"segment_id": "id"}), image)
+    with pytest.raises(ValueError, match="another CRS"):
+        rasterize_segments(frame.set_crs("EPSG:32634", allow_override=True), image)

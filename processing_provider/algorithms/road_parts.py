@@ -1,0 +1,186 @@
+"""Road-part shape filtering (Grote & Rottensteiner): segments in, road-part centre lines out."""
+import geopandas as gpd
+import numpy as np
+import shapely
+from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutputNumber,
+                       QgsProcessingOutputString, QgsProcessingParameterBand,
+                       QgsProcessingParameterBoolean, QgsProcessingParameterFeatureSink,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
+                       QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer)
+
+from gisroads.imagery.cues import image_cues
+from gisroads.imagery.roadparts import CRITERIA, extract_road_parts, rasterize_segments
+from gisroads.io.raster import read_raster
+
+from ..convert import (frame_to_sink, gisroads_errors, progress_callback, source_to_frame,
+                       style_on_load)
+from .base import GisroadsAlgorithm
+
+# parameter: (label, criteria key and index for (min, max) pairs, help)
+THRESHOLDS = {
+    "MIN_WIDTH": ("Smallest road width (metres)", ("width_range_m", 0),
+                  "mean width of a road part, twice the mean distance from its centre line "
+                  "to its border (paper: 3 m)"),
+    "MAX_WIDTH": ("Largest road width (metres)", ("width_range_m", 1),
+                  "wider segments are squares, lots or blocks (paper: 16 m)"),
+    "MIN_LENGTH": ("Shortest road part (metres)", ("min_length_m", None),
+                   "length of the centre line"),
+    "ELONGATION": ("Smallest elongation", ("elongation_min", None),
+                   "squared perimeter / area: 16 for a square, 25 for a 4:1 rectangle, 68 "
+                   "for an 8 x 120 m strip"),
+    "CONVEXITY": ("Smallest convexity", ("convexity_min", None),
+                  "area / convex-hull area needed at the smallest elongation"),
+    "ELONGATION_CURVED": ("Elongation of curved parts", ("elongation_curved_min", None),
+                          "from this elongation on (paper: 70) the smallest convexity of "
+                          "curved parts applies; in between the convexity needed falls "
+                          "linearly"),
+    "CONVEXITY_CURVED": ("Smallest convexity of curved parts", ("convexity_curved_min", None),
+                         "convexity needed by very elongated parts; set it to the smallest "
+                         "convexity to turn the relaxation for curves off"),
+    "WIDTH_CONSTANCY": ("Smallest width constancy", ("width_constancy_min", None),
+                        "mean / standard deviation of the width along the centre line "
+                        "(paper: 1.7)"),
+    "MAX_HEIGHT": ("Largest height above ground (metres)", ("height_max_m", None),
+                   "mean of the normalised DSM over the segment; used only with a DSM"),
+    "MAX_NDVI": ("Largest NDVI", ("ndvi_max", None),
+                 "mean NDVI; used only with a NIR band (paper: adapted per data set)"),
+    "MIN_INTENSITY": ("Smallest intensity (0-1)", ("intensity_range", 0),
+                      "darker segments are shadows; intensity is the mean of the bands "
+                      "stretched between their 1st and 99th percentiles"),
+    "MAX_INTENSITY": ("Largest intensity (0-1)", ("intensity_range", 1),
+                      "brighter segments are white roofs or paint"),
+    "MAX_INTENSITY_STD": ("Largest intensity standard deviation (0-1)",
+                          ("intensity_std_max", None),
+                          "roads are homogeneous; gardens, roofs with structure are not"),
+    "ROAD_WIDTH": ("Typical road width (metres)", ("road_width_m", None),
+                   "the width the quality measure rewards most"),
+}
+
+
+def _default(key, index):
+    value = CRITERIA[key]
+    return float(value if index is None else value[index])
+
+
+class RoadPartFiltering(GisroadsAlgorithm):
+    NAME = "roadparts"
+    DISPLAY_NAME = "Road-part shape filtering"
+    GROUP = "Imagery"
+    HELP = (
+        "<p>Tests every segment of an image segmentation against the road-part criteria of "
+        "Grote &amp; Rottensteiner (2010, Sec. 2.1.3) with the parameters of Grote et al. "
+        "(2009, Table 1) and keeps the road parts as centre lines.</p>"
+        "<p><b>Shape</b>: elongation (squared perimeter / area) and convexity (area / "
+        "convex-hull area), where very elongated curved parts may be less convex; mean width "
+        "within a road-width range and nearly constant along the centre line; a minimum "
+        "length. <b>Radiometry</b>: intensity neither very low (shadow) nor very high, low "
+        "intensity standard deviation, low NDVI when a NIR band is given, low height above "
+        "ground when a DSM is given. Adjacent road parts with similar directions are merged "
+        "when the merged region still passes. Each part gets a quality in 0-1 from its "
+        "elongation, width, width constancy, length and NDVI.</p>"
+        "<p>Outputs: <i>segments</i>, every segment with its measurements, <i>passed</i>, "
+        "<i>reason</i> (the first failing test) and <i>failures</i> (all of them), so the "
+        "thresholds can be tuned by looking at the map; and <i>road_parts</i>, the centre "
+        "lines with width, length, quality and band means, the input of subgraph "
+        "linking. The segments may come from the segmentation and grouping stages or be "
+        "drawn by hand.</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        double = QgsProcessingParameterNumber.Double
+        params = [
+            (QgsProcessingParameterRasterLayer("IMAGE", self.tr("Image")),
+             "RGB, CIR or panchromatic image (8 or 16 bit) in a projected CRS in metres"),
+            (QgsProcessingParameterFeatureSource("SEGMENTS", self.tr("Segments"),
+                                                 [QgsProcessing.TypeVectorPolygon]),
+             "segment polygons in the image's CRS, e.g. from segment grouping"),
+            (QgsProcessingParameterField("ID_FIELD", self.tr("Segment id field"),
+                                         "segment_id", "SEGMENTS",
+                                         QgsProcessingParameterField.Numeric, optional=True),
+             "non-negative integer id of each segment (segment_id when empty); polygons "
+             "with the same id are one segment"),
+            (QgsProcessingParameterBand("NIR_BAND", self.tr("Near-infrared band"), None,
+                                        "IMAGE", optional=True),
+             "optional: adds the NDVI test and leaves NIR out of the intensity"),
+            (QgsProcessingParameterBand("RED_BAND", self.tr("Red band"), None, "IMAGE",
+                                        optional=True),
+             "red band for the NDVI; by default band 2 when NIR is band 1 (CIR), else 1"),
+            (QgsProcessingParameterRasterLayer("DSM", self.tr("DSM"), optional=True),
+             "optional: surface heights in metres; adds the height test (normalised DSM)"),
+        ]
+        for name, (label, (key, index), text) in THRESHOLDS.items():
+            params.append((QgsProcessingParameterNumber(
+                name, self.tr(label), double, _default(key, index),
+                minValue=-1.0 if name == "MAX_NDVI" else 0.0), text))
+        params += [
+            (QgsProcessingParameterBoolean("MERGE", self.tr("Merge adjacent road parts"),
+                                           True),
+             "merge touching parts of similar direction when the union still passes"),
+            (QgsProcessingParameterNumber("MAX_DIRECTION",
+                                          self.tr("Largest direction difference to merge "
+                                                  "(degrees)"), double, 20.0, minValue=0.0,
+                                          maxValue=90.0),
+             "main directions of two parts to merge differ by at most this"),
+            (QgsProcessingParameterFeatureSink("OUTPUT_SEGMENTS", self.tr("Segments tested"),
+                                               QgsProcessing.TypeVectorPolygon),
+             "every segment with its measurements, passed, reason and failures"),
+            (QgsProcessingParameterFeatureSink("ROAD_PARTS", self.tr("Road parts"),
+                                               QgsProcessing.TypeVectorLine),
+             "centre lines of the road parts: part_id, segment_id, width_m, length_m, "
+             "quality, band means"),
+        ]
+        for param, text in params:
+            param.setHelp(self.tr(text))
+            self.addParameter(param)
+        self.addOutput(QgsProcessingOutputNumber("PARTS", self.tr("Road parts found")))
+        self.addOutput(QgsProcessingOutputString("CUES", self.tr("Cues used")))
+
+    def _criteria(self, parameters, context) -> dict:
+        criteria = {}
+        for name, (_, (key, index), _) in THRESHOLDS.items():
+            value = self.parameterAsDouble(parameters, name, context)
+            if index is None:
+                criteria[key] = value
+            else:
+                criteria.setdefault(key, list(CRITERIA[key]))[index] = value
+        return {k: tuple(v) if isinstance(v, list) else v for k, v in criteria.items()}
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        image_layer = self.parameterAsRasterLayer(parameters, "IMAGE", context)
+        dsm_layer = self.parameterAsRasterLayer(parameters, "DSM", context)
+        segments = source_to_frame(self.parameterAsSource(parameters, "SEGMENTS", context),
+                                   feedback)
+        id_field = (self.parameterAsFields(parameters, "ID_FIELD", context)
+                    or ["segment_id"])[0]
+        nir = self.parameterAsInt(parameters, "NIR_BAND", context) or None
+        red = self.parameterAsInt(parameters, "RED_BAND", context) or None
+        with gisroads_errors():
+            image = read_raster(image_layer.source())
+            dsm = None if dsm_layer is None else read_raster(dsm_layer.source())
+            labels = rasterize_segments(segments, image, id_column=id_field)
+            if (labels < 0).all():
+                raise QgsProcessingException(self.tr("no segment polygon overlaps the image"))
+            feedback.setProgressText(self.tr("image cues"))
+            cues = image_cues(image, nir_band=nir, red_band=red, dsm=dsm)
+            result = extract_road_parts(
+                labels, image, cues=cues,
+                merge=self.parameterAsBoolean(parameters, "MERGE", context),
+                max_direction_diff_rad=np.radians(
+                    self.parameterAsDouble(parameters, "MAX_DIRECTION", context)),
+                progress=progress_callback(feedback), **self._criteria(parameters, context))
+        tested = result.segments.copy()
+        # one geometry type for the sink: pieces of a segment are a MultiPolygon anyway
+        parts, owner = shapely.get_parts(tested.geometry.values, return_index=True)
+        tested = tested.set_geometry(gpd.GeoSeries(shapely.multipolygons(parts, indices=owner),
+                                                   index=tested.index, crs=tested.crs))
+        outputs = {}
+        for param, layer, frame, kind in (
+                ("OUTPUT_SEGMENTS", "segments", tested, "MultiPolygon"),
+                ("ROAD_PARTS", "road_parts", result.road_parts, "LineString")):
+            outputs[param] = frame_to_sink(self, parameters, param, context, frame, kind,
+                                           feedback)
+            style_on_load(context, outputs[param], layer)
+        passed = int(result.segments["passed"].sum())
+        feedback.pushInfo(f"{passed} road parts among {len(result.segments)} segments; "
+                          f"cues: {result.cues['cues']}")
+        return {**outputs, "PARTS": len(result.road_parts), "CUES": result.cues["cues"]}
+
