@@ -1,9 +1,11 @@
 """'Subgraph linking (integer program)' through qgis_process on hand-made road parts."""
 import geopandas as gpd
 import numpy as np
+import pytest
 import shapely
 from affine import Affine
 from pyproj import CRS
+from qgis.core import QgsApplication, QgsProcessingContext, QgsProcessingFeedback
 
 from gisroads.geo import GeoRaster
 from gisroads.io.raster import write_geotiff
@@ -86,6 +88,34 @@ def test_a_building_in_the_dsm_blocks_the_gap_a_tree_does_not(qgis_process, tmp_
     assert gaps.context_cues[0] == "ndvi,ndsm,intensity,rgb"
     strings = gpd.read_file(tmp_path / "strings.gpkg")
     assert sorted(strings.part_ids) == ["1", "2", "3,4"]
+
+
+@pytest.fixture(scope="module")
+def registry(qgis_app):
+    from processing_provider.provider import GisroadsProvider
+    provider = GisroadsProvider()
+    QgsApplication.processingRegistry().addProvider(provider)
+    yield QgsApplication.processingRegistry()
+    QgsApplication.processingRegistry().removeProvider(provider)
+
+
+def test_a_dsm_alone_gives_the_context_in_process(registry, tmp_path):
+    parts = write_parts(tmp_path / "parts.gpkg", [(1, [(0, 0), (40, 0)], 6.0, 0.9),
+                                                  (2, [(60, 0), (100, 0)], 6.0, 0.9)])
+    heights = np.zeros((40, 120), np.float32)          # x -10..110, y -20..20
+    heights[15:25, 55:65] = 8.0                        # a building in the gap
+    write_geotiff(tmp_path / "dsm.tif",
+                  GeoRaster(heights, Affine(1, 0, -10, 0, -1, 20), CRS(EPSG)))
+    algorithm = registry.createAlgorithmById("gisroads:subgraphlinking")
+    params = {"ROAD_PARTS": parts, "DSM": str(tmp_path / "dsm.tif"),
+              "GAP_EDGES": str(tmp_path / "gaps.gpkg"),
+              "ROAD_STRINGS": str(tmp_path / "strings.gpkg")}
+    context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
+    assert algorithm.prepare(params, context, feedback)
+    result = algorithm.runPrepared(params, context, feedback)
+    assert (result["SELECTED"], result["STRINGS"]) == (0, 2)
+    gaps = gpd.read_file(tmp_path / "gaps.gpkg")
+    assert gaps.n_building.tolist() == [1] and gaps.context_cues.tolist() == ["ndsm"]
 
 
 def test_geographic_road_parts_fail_cleanly(qgis_process, tmp_path):
