@@ -68,6 +68,9 @@ MIN_SEARCH_RADIUS_M = 10.0
 MAX_SEARCH_RADIUS_M = 30.0
 #: Largest direction difference of collinear roads, as the LiDAR chaining's tolerance.
 COLLINEAR_DEG = 20.0
+#: Length of the end section whose chord gives a road's direction at that end (as the
+#: subgraph stage's ``END_WINDOW_M``).
+END_WINDOW_M = 10.0
 #: Parallel roads are duplicates when their centre lines stay within the wider road's half
 #: width plus this margin over at least ``PARALLEL_SHARE`` of each road's length.
 PARALLEL_MARGIN_M = 1.0
@@ -220,6 +223,15 @@ def _alongside_share(lines, a, b, near_m, cos_tol) -> np.ndarray:
     return np.bincount(pair, weights=close & aligned, minlength=len(a)) / count
 
 
+def _length_inside(lines, areas) -> np.ndarray:
+    """Length of each line inside its area (pairwise)."""
+    inside = np.zeros(len(lines))
+    # intersects() first: GEOS 3.11 flags the NaN z of an empty intersection as invalid
+    hit = shapely.intersects(lines, areas)
+    inside[hit] = shapely.length(shapely.intersection(lines[hit], areas[hit]))
+    return inside
+
+
 def remove_duplicates(roads: gpd.GeoDataFrame, *, parallel_margin_m: float = PARALLEL_MARGIN_M,
                       parallel_share: float = PARALLEL_SHARE, collinear_deg: float = COLLINEAR_DEG,
                       overlap_share: float = OVERLAP_SHARE) -> gpd.GeoDataFrame:
@@ -251,7 +263,7 @@ def remove_duplicates(roads: gpd.GeoDataFrame, *, parallel_margin_m: float = PAR
     """
     if len(roads) < 2:
         return roads.copy()
-    lines = roads.geometry.values
+    lines = np.asarray(roads.geometry.values, dtype=object)
     width = roads["width_m"].to_numpy(float)
     # rank 0 is the best road: higher quality first, then the longer
     rank = np.empty(len(roads), dtype=np.int64)
@@ -263,6 +275,12 @@ def remove_duplicates(roads: gpd.GeoDataFrame, *, parallel_margin_m: float = PAR
     keep = i < j
     i, j = i[keep], j[keep]
     near = np.maximum(width[i], width[j]) / 2 + parallel_margin_m
+    # closeness alone, measured exactly, rules out most pairs (crossings, T junctions)
+    close_i = _length_inside(lines[i], shapely.buffer(lines[j], near))
+    close_j = _length_inside(lines[j], shapely.buffer(lines[i], near))
+    maybe = ((close_i >= parallel_share * shapely.length(lines[i]))
+             & (close_j >= parallel_share * shapely.length(lines[j])))
+    i, j, near = i[maybe], j[maybe], near[maybe]
     parallel = ((_alongside_share(lines, i, j, near, cos_tol) >= parallel_share)
                 & (_alongside_share(lines, j, i, near, cos_tol) >= parallel_share))
     worse = np.where(rank[i[parallel]] > rank[j[parallel]], i[parallel], j[parallel])
@@ -342,7 +360,7 @@ class _JunctionSearch:
     free ends and constructed connections."""
 
     def __init__(self, roads, *, min_search_radius_m, max_search_radius_m, collinear_deg,
-                 overshoot_m):
+                 end_window_m, overshoot_m):
         self.n = len(roads)
         self.lines = np.asarray(roads.geometry.values, dtype=object)
         self.tree = shapely.STRtree(self.lines)
@@ -355,10 +373,13 @@ class _JunctionSearch:
         # end e belongs to road e // 2, at its start when e is even
         first = np.array([c[0] for c in self.coords]).reshape(-1, 2)
         last = np.array([c[-1] for c in self.coords]).reshape(-1, 2)
-        second = np.array([c[1] for c in self.coords]).reshape(-1, 2)
-        before_last = np.array([c[-2] for c in self.coords]).reshape(-1, 2)
+        length = shapely.length(self.lines)
+        window = np.minimum(end_window_m, length / 2)
+        inner_first = shapely.get_coordinates(shapely.line_interpolate_point(self.lines, window))
+        inner_last = shapely.get_coordinates(shapely.line_interpolate_point(self.lines,
+                                                                            length - window))
         self.point = np.stack([first, last], axis=1).reshape(-1, 2)
-        outward = np.stack([first - second, last - before_last], axis=1).reshape(-1, 2)
+        outward = np.stack([first - inner_first, last - inner_last], axis=1).reshape(-1, 2)
         self.direction = outward / np.hypot(*outward.T)[:, None]
         self.radius = np.repeat(min_search_radius_m + self.quality
                                 * (max_search_radius_m - min_search_radius_m), 2)
@@ -368,6 +389,7 @@ class _JunctionSearch:
         self.version = np.zeros(2 * self.n, dtype=np.int64)
         self.connections = []   # dicts: kind, from, to, coords, verified, width, quality
         self.seen = {}          # candidate key -> index in connections (for the QA layer)
+        self.built = {}         # index in connections -> line, of the accepted ones
 
     # -- crossings ---------------------------------------------------------------------------
 
@@ -446,8 +468,10 @@ class _JunctionSearch:
                     continue
                 if abs(float(d @ dq)) >= self.cos_collinear:
                     continue  # parallel, side by side: no junction between them
-                # p + t d = q + s dq
-                t, s = np.linalg.solve(np.column_stack([d, -dq]), v)
+                # p + t d = q + s dq, solved by cross products (d and dq are not parallel)
+                det = d[0] * dq[1] - d[1] * dq[0]
+                t = (v[0] * dq[1] - v[1] * dq[0]) / det
+                s = (v[0] * d[1] - v[1] * d[0]) / det
                 if _EPS_M < t <= r and _EPS_M < s <= rq:
                     x = p + t * d
                     found.append((t + s, 2, ("intersection-polygon", *sorted((end, other))),
@@ -456,12 +480,10 @@ class _JunctionSearch:
             hit = _first_hit(ray, line, p)
             if hit is not None and self._crosses(d, line, hit):
                 found.append(self._end_road(end, target, hit, False))
-        for index, connection in enumerate(self.connections):
-            if not connection["verified"] or connection["kind"] == "crossing":
-                continue
-            line = shapely.linestrings(connection["xy"])
-            if not shapely.intersects(line, region):
-                continue
+        built = np.fromiter(self.built, dtype=np.int64, count=len(self.built))
+        built_lines = np.array(list(self.built.values()), dtype=object)
+        reached = shapely.intersects(built_lines, region) if len(built) else []
+        for index, line in zip(built[reached], built_lines[reached]):
             hit = _first_hit(ray, line, p)
             if hit is not None and self._crosses(d, line, hit):
                 found.append(self._end_road(end, index, hit, True))
@@ -513,11 +535,13 @@ class _JunctionSearch:
                 updated, xy[-1] = _insert_vertex(holder, xy[-1])
                 if is_connection:
                     self.connections[target]["xy"] = updated
+                    self.built[target] = shapely.linestrings(updated)
                 else:
                     self.coords[target] = updated
             index = self.seen[key]
             connection = self.connections[index]
             connection.update(xy=xy, verified=True)
+            self.built[index] = shapely.linestrings(xy)
             if not is_connection:  # found from either end: name the roads in its direction
                 connection.update(from_string=self.string_id[end // 2],
                                   to_string=self.string_id[target])
@@ -537,6 +561,7 @@ def find_junctions(roads: gpd.GeoDataFrame, *,
                    min_search_radius_m: float = MIN_SEARCH_RADIUS_M,
                    max_search_radius_m: float = MAX_SEARCH_RADIUS_M,
                    collinear_deg: float = COLLINEAR_DEG,
+                   end_window_m: float = END_WINDOW_M,
                    overshoot_m: float = OVERSHOOT_M) -> tuple[gpd.GeoDataFrame,
                                                               gpd.GeoDataFrame]:
     """Junction connections between roads (Sec. 2.3, second paragraph).
@@ -549,7 +574,7 @@ def find_junctions(roads: gpd.GeoDataFrame, *,
     min_search_radius_m, max_search_radius_m : float
         Radius (metres) of the semicircle searched ahead of an end of a road of quality 0
         and 1; linear in between. The semicircle is centred on the end point and points
-        along the road's last approximation segment.
+        in the road's direction at that end.
     collinear_deg : float
         Roads whose directions differ by at most this (degrees) are collinear: joined end to
         end when pointing at each other, the other end inside the semicircle and within the
@@ -557,6 +582,10 @@ def find_junctions(roads: gpd.GeoDataFrame, *,
         through the intersection of the end's extension with the other road (end-road) or
         with the other road's extension (intersection-polygon, through both end points);
         each extension reaches at most its end's search radius.
+    end_window_m : float
+        A road's direction at an end is that of the chord from the point this far (metres;
+        at most half the road) along it to the end: the last approximation segment alone
+        can be a short, noisy one.
     overshoot_m : float
         An end within a crossing road's half width plus this margin (metres) past it ends
         at the crossing.
@@ -586,7 +615,8 @@ def find_junctions(roads: gpd.GeoDataFrame, *,
                                                if "string_id" in roads else np.int64, crs)
     search = _JunctionSearch(roads, min_search_radius_m=min_search_radius_m,
                              max_search_radius_m=max_search_radius_m,
-                             collinear_deg=collinear_deg, overshoot_m=overshoot_m)
+                             collinear_deg=collinear_deg, end_window_m=end_window_m,
+                             overshoot_m=overshoot_m)
     search.crossings()
     search.run()
     edited = roads.copy()
@@ -737,6 +767,7 @@ def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
                        min_search_radius_m: float = MIN_SEARCH_RADIUS_M,
                        max_search_radius_m: float = MAX_SEARCH_RADIUS_M,
                        collinear_deg: float = COLLINEAR_DEG,
+                       end_window_m: float = END_WINDOW_M,
                        parallel_margin_m: float = PARALLEL_MARGIN_M,
                        parallel_share: float = PARALLEL_SHARE,
                        overlap_share: float = OVERLAP_SHARE,
@@ -757,7 +788,7 @@ def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
         CRS of strings that carry none; must agree with theirs otherwise.
     tolerance_m : float
         See :func:`approximate_strings`.
-    min_search_radius_m, max_search_radius_m, collinear_deg, overshoot_m : float
+    min_search_radius_m, max_search_radius_m, collinear_deg, end_window_m, overshoot_m : float
         See :func:`find_junctions`.
     parallel_margin_m, parallel_share, overlap_share : float
         See :func:`remove_duplicates`.
@@ -795,7 +826,7 @@ def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
     roads, connections = find_junctions(
         roads, min_search_radius_m=min_search_radius_m,
         max_search_radius_m=max_search_radius_m, collinear_deg=collinear_deg,
-        overshoot_m=overshoot_m)
+        end_window_m=end_window_m, overshoot_m=overshoot_m)
     report(progress, 0.7, "checking connected components")
     roads, connections = significant_components(roads, connections,
                                                 min_total_length_m=min_total_length_m,

@@ -181,6 +181,18 @@ def test_collinear_roads_are_joined_end_to_end_and_their_width_averaged():
     assert polygon.area == pytest.approx(road["width_m"] * road["length_m"], rel=0.01)
 
 
+def test_direction_at_an_end_is_that_of_its_last_metres_not_of_a_hook():
+    # the last approximation segment of the left road turns 45 degrees away over 2 m;
+    # over its last 10 m the road still points at the right one
+    left = LineString([(-60, 0), (-8, 0), (-6.5, 1.5)])
+    right = LineString([(6, 0), (60, 0)])
+    network, connections = strings_to_network(strings([left, right]))
+    assert verified(connections)["kind"].tolist() == ["end-end"]
+    assert len(network.centrelines) == 1
+    _, unjoined = strings_to_network(strings([left, right]), end_window_m=1.0)
+    assert "end-end" not in set(verified(unjoined)["kind"])
+
+
 def test_crossing_roads_give_one_junction_of_degree_4():
     network, connections = strings_to_network(strings([LineString([(-50, 0), (50, 0)]),
                                                        LineString([(3, -50), (-3, 50)])]))
@@ -300,9 +312,10 @@ def test_progress_is_reported_and_cancel_stops():
 
 def scene_strings(scene, seed):
     """What the earlier stages might give: the truth's edges cut back 2.5-7.5 m at every
-    junction (gaps of 5-15 m between opposite ends), centre lines wobbling by 0.3 m, widths
-    off by up to 15 %, random qualities; plus a lower-quality parallel duplicate of one
-    road and three short false fragments away from the roads."""
+    junction (gaps of 5-15 m between opposite ends) and interrupted by a 12 m gap in the
+    middle of edges longer than 80 m, centre lines wobbling by 0.3 m, widths off by up to
+    15 %, random qualities; plus a lower-quality parallel duplicate of one road and three
+    short false fragments away from the roads."""
     rng = np.random.default_rng(seed)
     lines = shapely.force_2d(scene.truth_edges.geometry.values)
     width = scene.roads.set_index("road_id").loc[scene.truth_edges["road_id"], "width_m"]
@@ -314,12 +327,17 @@ def scene_strings(scene, seed):
         at_junction = [np.min(np.hypot(*(junctions - end).T)) < 1e-6 for end in ends]
         start = rng.uniform(2.5, 7.5) if at_junction[0] else 0.0
         stop = line.length - (rng.uniform(2.5, 7.5) if at_junction[1] else 0.0)
-        if stop - start < 5:
-            continue
-        coords = xy(shapely.segmentize(substring(line, start, stop), 2.0))
-        coords[1:-1] += rng.normal(0, 0.3, coords[1:-1].shape)
-        pieces.append(shapely.linestrings(coords))
-        widths.append(w * rng.uniform(0.85, 1.1))
+        cuts = [start, stop]
+        if stop - start > 80:
+            middle = rng.uniform(start + 30, stop - 30)
+            cuts = [start, middle - 6, middle + 6, stop]
+        for begin, end in zip(cuts[::2], cuts[1::2]):
+            if end - begin < 5:
+                continue
+            coords = xy(shapely.segmentize(substring(line, begin, end), 2.0))
+            coords[1:-1] += rng.normal(0, 0.3, coords[1:-1].shape)
+            pieces.append(shapely.linestrings(coords))
+            widths.append(w * rng.uniform(0.85, 1.1))
     quality = list(rng.uniform(0.4, 1.0, len(pieces)))
     longest = int(np.argmax(shapely.length(pieces)))
     pieces.append(shapely.offset_curve(pieces[longest], 1.5))
@@ -352,12 +370,14 @@ def test_synthetic_scene_pieces_become_the_truth_network(seed):
           f"(pieces {before['junction_recall']:.3f}), precision "
           f"{topology['junction_precision']:.3f}, components "
           f"{topology['components_extracted']} / {topology['components_reference']}")
-    # measured: seed 0 0.998 / 1.000 / 0.941, seed 2 0.998 / 1.000 / 0.824
-    assert buffer["completeness"] >= 0.97
-    assert buffer["correctness"] >= 0.98          # duplicate and fragments are gone
-    assert topology["junction_recall"] >= 0.8 > before["junction_recall"]
-    assert topology["junction_precision"] >= 0.9
-    assert topology["components_extracted"] <= topology["components_reference"] + 1
+    # measured (seeds 0-5 alike): completeness 0.996-1.000, correctness 1.000, junction
+    # recall 16/17 (the truth's two junctions 2.5 m apart on the avenue become one),
+    # precision 1.000, 2 / 2 components
+    assert buffer["completeness"] >= 0.99
+    assert buffer["correctness"] >= 0.99          # duplicate and fragments are gone
+    assert topology["junction_recall"] >= 0.9 > 0.1 >= before["junction_recall"]
+    assert topology["junction_precision"] >= 0.95
+    assert topology["components_extracted"] == topology["components_reference"]
     assert set(verified(connections)["kind"]) >= {"end-end", "end-road"}
     width = network.centrelines["width_m"]
     assert width.between(0.8 * truth.centrelines["width_m"].min(),
