@@ -13,7 +13,7 @@ from pyproj import CRS
 from rasterio import features
 from scipy import ndimage
 
-from gisroads.blocks import (_non_road_regions, block_affinity, block_nodes, city_blocks,
+from gisroads.blocks import (block_affinity, block_nodes, city_blocks,
                              max_likelihood_between, road_likelihood, thin_points)
 from gisroads.geo import GeoRaster
 from gisroads.io.las import LasPointWriter
@@ -158,7 +158,7 @@ def test_missed_road_segment_still_separates_its_two_blocks(n_blocks):
     likelihood = grid_likelihood(missing=True)
     band = road_likelihood(likelihood)
     # the thresholded likelihood alone joins the two blocks: 8 regions, not 9
-    assert _non_road_regions(band, 0.5 * L_MAX, 400.0) == 8
+    assert ndimage.label(band.data < 0.5 * L_MAX)[1] == 8
     blocks = city_blocks(likelihood, n_blocks=n_blocks)
     assert len(blocks) == 9
     squares = true_blocks()
@@ -172,6 +172,19 @@ def test_missed_road_segment_still_separates_its_two_blocks(n_blocks):
     shares = shapely.area(shapely.intersection(blocks.geometry.values, gap))
     assert shares.sum() == pytest.approx(gap.area, rel=0.01)
     assert sorted(shares)[-2] > 0.2 * gap.area
+
+
+def test_blocks_cut_off_by_roads_are_never_merged_to_meet_n_blocks():
+    blocks = city_blocks(grid_likelihood(), n_blocks=1)
+    assert len(blocks) == blocks.segment.nunique() == 9
+    # more blocks than the grid has: the extra cuts go where the eigenvalues are largest,
+    # first the missed road segment
+    blocks = city_blocks(grid_likelihood(missing=True), n_blocks=8)
+    assert len(blocks) == 8
+    blocks = city_blocks(grid_likelihood(missing=True), n_blocks=10)
+    assert len(blocks) == 10
+    squares = true_blocks()
+    assert block_at(blocks, squares[0, 0].centroid) != block_at(blocks, squares[0, 1].centroid)
 
 
 def test_ground_points_as_nodes_give_the_same_blocks():
