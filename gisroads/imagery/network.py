@@ -14,8 +14,9 @@ contract (:class:`gisroads.geo.RoadNetwork`) plus the QA layer ``junction_connec
 2. **Duplicates** (:func:`remove_duplicates`). Of two parallel roads lying close together,
    the one of better quality is kept; then roads whose region is mostly covered by the
    regions of other roads are deleted.
-3. **Junctions** (:func:`find_junctions`). A semicircle ahead of each road end, its radius
-   growing with the road's quality, is searched for other roads. Collinear roads (pointing
+3. **Junctions** (:func:`find_junctions`). A semicircle ahead of each road end (in the
+   direction of the road's last ``end_window_m``), its radius growing with the road's
+   quality, is searched for other roads. Collinear roads (pointing
    at each other) are joined end to end when the other end lies in the semicircle; otherwise
    the end is extended to the point where its extension hits the other road (end-road), or
    joined to the other road's end by the short polygon through the intersection of both
@@ -57,7 +58,9 @@ from shapely.ops import substring
 
 from ..geo import RoadNetwork, network_from_centrelines
 from ..progress import Progress, report
+# the shared noding and tangent steps of the LiDAR and snake vectorisers (private there)
 from ..vectorize.ribbons import _node as node_roads
+from ..vectorize.ribbons import _tangents
 
 METHOD = "grote-rottensteiner"
 #: Polygon approximation tolerance: a tenth to a fifth of a suburban road's width.
@@ -94,7 +97,6 @@ JUNCTION_MERGE_M = 3.0
 
 _EPS_M = 1e-9
 _SAMPLE_STEP_M = 1.0     # spacing of the points that test "runs alongside"
-_TANGENT_STEP_M = 0.5    # half the baseline of a tangent estimate
 _ARC_POINTS = 33         # vertices of a search semicircle's arc
 
 
@@ -195,16 +197,6 @@ def road_regions(roads: gpd.GeoDataFrame) -> np.ndarray:
 
 
 # --- 2. duplicates --------------------------------------------------------------------------
-
-def _tangents(lines, along_m) -> np.ndarray:
-    """Unit directions of lines at distances ``along_m`` along them, shape (n, 2)."""
-    length = shapely.length(lines)
-    back = shapely.line_interpolate_point(lines, np.clip(along_m - _TANGENT_STEP_M, 0, length))
-    ahead = shapely.line_interpolate_point(lines, np.clip(along_m + _TANGENT_STEP_M, 0, length))
-    d = shapely.get_coordinates(ahead) - shapely.get_coordinates(back)
-    norm = np.hypot(d[:, 0], d[:, 1])
-    return d / np.where(norm > 0, norm, 1.0)[:, None]
-
 
 def _alongside_share(lines, a, b, near_m, cos_tol) -> np.ndarray:
     """Share of the length of ``lines[a]`` running alongside ``lines[b]``: within ``near_m``
