@@ -101,8 +101,6 @@ RELATION_VALUES = {
     "vehicle": 0.5,
     "asphalt": 0.5,
 }
-#: Object kinds whose area counts in the occlusion share ``w_CO``.
-OCCLUDING = ("tree", "vehicle", "shadow")
 #: Gaps shorter than this ignore their context (too short to judge), metres.
 SMALL_GAP_M = 3.0
 #: Context weight a link needs when its relation weight is 0.

@@ -306,6 +306,9 @@ def test_bad_road_parts_are_refused():
     with pytest.raises(ValueError, match="LineString"):
         gap_edges(parts.set_geometry(parts.buffer(1.0)))
     assert len(gap_edges(parts.iloc[:0])) == 0
+    gaps, strings = link_road_parts(parts.iloc[:1], transform=GRID, ndsm=np.zeros(SHAPE))
+    assert len(gaps) == 0 and {"occlusion", "weight", "selected"} <= set(gaps.columns)
+    assert strings.part_ids.tolist() == ["1"]
     assert len(road_strings(parts.iloc[:0], gap_edges(parts.iloc[:0]).assign(selected=[]))) == 0
 
 
