@@ -31,6 +31,13 @@ def iter_source(source, *, chunk_size: int = DEFAULT_CHUNK) -> Iterator[tuple[in
         offset += len(chunk)
 
 
+def _sorted_unique(values: np.ndarray) -> np.ndarray:
+    """Distinct values, ascending (by a sort: numpy 2's hashing np.unique is far slower on
+    millions of cell keys)."""
+    values = np.sort(values)
+    return values[np.concatenate([[True], values[1:] != values[:-1]])]
+
+
 class GridBuckets:
     """Square grid cells around groups of sample points, to fetch a chunk's nearby points.
 
@@ -52,8 +59,14 @@ class GridBuckets:
         near = (cells[:, None, :] + ring[None]).reshape(-1, 2)
         keys = self._key(near)
         groups = np.repeat(np.asarray(group), len(ring))
-        self.cells = {int(g): np.unique(keys[groups == g]) for g in np.unique(groups)}
-        self.corridor = np.unique(keys)
+        order = np.lexsort((keys, groups))
+        keys, groups = keys[order], groups[order]
+        first = np.concatenate([[True], (keys[1:] != keys[:-1]) | (groups[1:] != groups[:-1])])
+        keys, groups = keys[first], groups[first]
+        bounds = np.flatnonzero(np.diff(groups)) + 1
+        self.cells = {int(g[0]): k for g, k in zip(np.split(groups, bounds),
+                                                    np.split(keys, bounds))}
+        self.corridor = _sorted_unique(keys)
 
     @staticmethod
     def _key(cells: np.ndarray) -> np.ndarray:
@@ -65,7 +78,12 @@ class GridBuckets:
 
     def in_corridor(self, xy: np.ndarray) -> np.ndarray:
         """Which points fall in any group's cells."""
-        return np.isin(self.keys(xy), self.corridor)
+        keys = self.keys(xy)
+        order = np.argsort(keys)  # searching sorted keys is ten times faster
+        at = np.minimum(np.searchsorted(self.corridor, keys[order]), len(self.corridor) - 1)
+        inside = np.empty(len(keys), bool)
+        inside[order] = self.corridor[at] == keys[order]
+        return inside
 
     def members(self, sorted_keys: np.ndarray, group: int) -> np.ndarray:
         """Positions, in an array of point keys sorted ascending, of the group's points."""

@@ -115,7 +115,7 @@ class RegisteredMap:
 
 def _line_parts(lines: gpd.GeoDataFrame) -> tuple[list[np.ndarray], np.ndarray]:
     """2D vertex arrays of every non-degenerate LineString part, and the input row of each."""
-    geoms = lines.geometry.values
+    geoms = np.asarray(lines.geometry.values)
     if len(geoms) and not np.isin(shapely.get_type_id(geoms), (1, 5)).all():
         raise ValueError("the road map must hold LineString or MultiLineString geometries")
     parts, row = shapely.get_parts(geoms, return_index=True)
@@ -184,8 +184,9 @@ def map_topology(lines: gpd.GeoDataFrame, *, snap_m: float = SNAP_M) -> MapTopol
                                    return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
     centres = list(centres)
-    for key in np.flatnonzero(counts > 1):
-        members = np.flatnonzero(inverse == key)
+    by_key = np.argsort(inverse, kind="stable")
+    groups = np.split(by_key, np.cumsum(counts)[:-1])
+    for members in (groups[key] for key in np.flatnonzero(counts > 1)):
         if len(np.unique(part_of[members])) < 2:
             continue
         node = len(centres)
@@ -233,92 +234,87 @@ def map_topology(lines: gpd.GeoDataFrame, *, snap_m: float = SNAP_M) -> MapTopol
 # Spline sampling
 
 
-def _tangent_matrix(k: int) -> sp.csr_matrix:
-    """Cardinal tangents of ``k`` control values per unit of the control index; one-sided
-    differences at both ends."""
-    scale = 1.0 - TENSION
-    rows = np.repeat(np.arange(k), 2)
-    cols = np.column_stack([np.maximum(np.arange(k) - 1, 0),
-                            np.minimum(np.arange(k) + 1, k - 1)]).ravel()
-    step = np.minimum(np.arange(k) + 1, k - 1) - np.maximum(np.arange(k) - 1, 0)
-    vals = np.column_stack([-scale / step, scale / step]).ravel()
-    return sp.csr_matrix((vals, (rows, cols)), shape=(k, k))
-
-
-def _spline_basis(station: np.ndarray, length: float, k: int) -> sp.csr_matrix:
-    """Weights of ``k`` evenly spaced control values (index 0 at station 0, k - 1 at the
-    road's end) giving the spline's value at each station (Hermite form)."""
-    t = station / length * (k - 1)
-    i = np.minimum(t.astype(np.int64), k - 2)
-    u = t - i
-    h00, h10 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u
-    h01, h11 = -2 * u**3 + 3 * u**2, u**3 - u**2
-    rows = np.arange(len(station))
-    pick_i = sp.csr_matrix((np.ones(len(i)), (rows, i)), shape=(len(i), k))
-    pick_j = sp.csr_matrix((np.ones(len(i)), (rows, i + 1)), shape=(len(i), k))
-    tangents = _tangent_matrix(k)
-    return (sp.diags(h00) @ pick_i + sp.diags(h01) @ pick_j
-            + sp.diags(h10) @ pick_i @ tangents + sp.diags(h11) @ pick_j @ tangents).tocsr()
-
-
 @dataclass
 class _Samples:
     road_id: np.ndarray
     station_m: np.ndarray
     xy: np.ndarray
     tangent: np.ndarray
-    basis: sp.csr_matrix       # samples x controls
-    smoothness: sp.csr_matrix  # second differences of controls along each road
+    basis: sp.csr_matrix       # samples x controls: the spline's value at each sample
+    smoothness: sp.csr_matrix  # second differences of consecutive controls along each road
 
 
 def _sample_roads(topology: MapTopology, control_spacing_m: float,
                   sample_spacing_m: float) -> _Samples:
+    """Samples of every road and the Cardinal spline weights of the control elevations.
+
+    Road r has k_r >= 2 evenly spaced controls, the first and last being its intersections'
+    (shared with the other roads there), the others its own, numbered after the
+    intersections. On the span between controls i and i + 1 the spline is the Hermite
+    cubic h00 z_i + h10 m_i + h01 z_(i+1) + h11 m_(i+1), with the Cardinal tangents
+    m_j = (1 - c)(z_(j+1) - z_(j-1)) / 2 per control step (one-sided at the road's ends).
+    """
     roads = topology.roads
-    n_nodes = len(topology.intersections)
-    next_control = n_nodes
-    blocks, smooth, ids, stations, xys, tangents = [], [], [], [], [], []
-    for road, line, a, b in zip(roads["road_id"], roads.geometry.values,
-                                roads["start_node"], roads["end_node"]):
-        length = shapely.length(line)
-        k = max(2, int(round(length / control_spacing_m)) + 1)
-        controls = np.concatenate([[a], np.arange(next_control, next_control + k - 2), [b]])
-        next_control += k - 2
-        station = np.linspace(0.0, length, max(2, int(np.ceil(length / sample_spacing_m)) + 1))
-        xy = shapely.get_coordinates(shapely.line_interpolate_point(line, station))
-        direction = np.gradient(xy, axis=0)
-        tangents.append(direction / np.maximum(np.hypot(*direction.T), 1e-12)[:, None])
-        local = _spline_basis(station, length, k).tocoo()
-        blocks.append((local.row, controls[local.col], local.data, len(station)))
-        if k >= 3:
-            r = np.arange(k - 2)
-            smooth.append((np.repeat(r, 3), np.column_stack([controls[:-2], controls[1:-1],
-                                                             controls[2:]]).ravel(),
-                           np.tile([1.0, -2.0, 1.0], k - 2), k - 2))
-        ids.append(np.full(len(station), road, np.int64))
-        stations.append(station)
-        xys.append(xy)
+    geoms = np.asarray(roads.geometry.values)  # plain shapely objects: fast ufuncs
+    start, end = roads["start_node"].to_numpy(), roads["end_node"].to_numpy()
+    length = shapely.length(geoms)
+    k = np.maximum(2, np.round(length / control_spacing_m).astype(np.int64) + 1)
+    m = np.maximum(2, np.ceil(length / sample_spacing_m).astype(np.int64) + 1)
+    first_interior = len(topology.intersections) + np.concatenate([[0], np.cumsum(k - 2)[:-1]])
+    n_controls = int(len(topology.intersections) + (k - 2).sum())
 
-    def stack(parts):
-        offsets = np.concatenate([[0], np.cumsum([p[3] for p in parts])]).astype(np.int64)
-        rows = np.concatenate([p[0] + o for p, o in zip(parts, offsets)]) if parts else []
-        cols = np.concatenate([p[1] for p in parts]) if parts else []
-        vals = np.concatenate([p[2] for p in parts]) if parts else []
-        return sp.csr_matrix((vals, (rows, cols)), shape=(int(offsets[-1]), next_control))
+    def control(r, j):
+        """Global index of control ``j`` of road ``r``."""
+        return np.where(j == 0, start[r], np.where(j == k[r] - 1, end[r],
+                                                   first_interior[r] + j - 1))
 
-    return _Samples(np.concatenate(ids), np.concatenate(stations), np.concatenate(xys),
-                    np.concatenate(tangents), stack(blocks), stack(smooth))
+    road = np.repeat(np.arange(len(roads)), m)
+    local = np.arange(int(m.sum())) - np.repeat(np.cumsum(m) - m, m)
+    station = local / (m[road] - 1) * length[road]
+    xy = shapely.get_coordinates(shapely.line_interpolate_point(geoms[road], station))
+    before = np.where(local == 0, 0, -1) + np.arange(len(road))
+    after = np.where(local == m[road] - 1, 0, 1) + np.arange(len(road))
+    direction = xy[after] - xy[before]
+    tangent = direction / np.maximum(np.hypot(*direction.T), 1e-12)[:, None]
+
+    kr = k[road]
+    t = station / length[road] * (kr - 1)
+    i = np.minimum(t.astype(np.int64), kr - 2)
+    u = t - i
+    h00, h10 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u
+    h01, h11 = -2 * u**3 + 3 * u**2, u**3 - u**2
+    columns, weights = [control(road, i), control(road, i + 1)], [h00, h01]
+    for j, h in ((i, h10), (i + 1, h11)):
+        lo, hi = np.maximum(j - 1, 0), np.minimum(j + 1, kr - 1)
+        slope = (1.0 - TENSION) * h / (hi - lo)
+        columns += [control(road, hi), control(road, lo)]
+        weights += [slope, -slope]
+    rows = np.tile(np.arange(len(road)), len(columns))
+    basis = sp.csr_matrix((np.concatenate(weights), (rows, np.concatenate(columns))),
+                          shape=(len(road), n_controls))
+
+    bent = np.repeat(np.arange(len(roads)), k - 2)  # one row per interior control
+    j = np.arange(int((k - 2).sum())) - np.repeat(np.cumsum(k - 2) - (k - 2), k - 2) + 1
+    smooth_columns = np.concatenate([control(bent, j - 1), control(bent, j),
+                                     control(bent, j + 1)])
+    smooth_weights = np.repeat([1.0, -2.0, 1.0], len(bent))
+    smoothness = sp.csr_matrix((smooth_weights, (np.tile(np.arange(len(bent)), 3),
+                                                 smooth_columns)),
+                               shape=(len(bent), n_controls))
+    return _Samples(roads["road_id"].to_numpy()[road], station, xy, tangent, basis,
+                    smoothness)
 
 
 # ---------------------------------------------------------------------------------------
 # Registration
 
 
-def _neighbours(tree: cKDTree, xy: np.ndarray, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+def _neighbours(points_xy: np.ndarray, xy: np.ndarray,
+                radius_m: float) -> tuple[np.ndarray, np.ndarray]:
     """(sample, point) pairs with the point within ``radius_m`` of the sample in XY."""
-    lists = tree.query_ball_point(xy, radius_m)
-    counts = np.fromiter(map(len, lists), np.int64, count=len(lists))
-    points = np.fromiter((p for ps in lists for p in ps), np.int64, count=int(counts.sum()))
-    return np.repeat(np.arange(len(xy)), counts), points
+    pairs = cKDTree(xy).sparse_distance_matrix(cKDTree(points_xy), radius_m,
+                                               output_type="ndarray")
+    return pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
 
 
 def _stats(sample: np.ndarray, z: np.ndarray, n: int):
@@ -342,8 +338,8 @@ def _continuous(road_id, station, z, max_incline: float) -> np.ndarray:
     makes a short run that jumps up and down again: it is dropped.
     """
     keep = np.zeros(len(z), bool)
-    for road in np.unique(road_id):
-        idx = np.flatnonzero((road_id == road) & np.isfinite(z))
+    for samples in np.split(np.arange(len(z)), np.flatnonzero(np.diff(road_id)) + 1):
+        idx = samples[np.isfinite(z[samples])]  # the road's samples seeing points
         if len(idx) == 0:
             continue
         s, h = station[idx], z[idx]
@@ -476,7 +472,7 @@ def register_map(lines: gpd.GeoDataFrame, cloud: PointCloud, *, control_spacing_
     # Only the points in the grid cells around the samples go into the k-d tree.
     near = np.flatnonzero(GridBuckets(samples.xy, np.zeros(n, np.int64), support_radius_m)
                           .in_corridor(cloud.xyz[:, :2]))
-    sample, point = _neighbours(cKDTree(cloud.xyz[near, :2]), samples.xy, support_radius_m)
+    sample, point = _neighbours(cloud.xyz[near, :2], samples.xy, support_radius_m)
     point = near[point]
     z = cloud.xyz[point, 2]
 
