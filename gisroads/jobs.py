@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import geopandas as gpd
+import numpy as np
 
 from .evaluate import evaluate_network, match_layers
 from .geo import CENTRELINES, POLYGONS, GeoRaster, network_from_centrelines
@@ -202,6 +203,164 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
         result["quicklook"] = Path(quicklook)
     report(progress, 1.0, "done")
     return result
+
+
+def _layer(source, layer: str) -> gpd.GeoDataFrame:
+    """A GeoDataFrame as given, or layer ``layer`` of a file (its only layer otherwise)."""
+    if isinstance(source, gpd.GeoDataFrame):
+        return source
+    return read_layer(source, layer if layer in list_layers(source) else None)
+
+
+def _level_image(intensity_path, level: int) -> GeoRaster:
+    raster = read_raster(intensity_path)
+    if not 0 <= level < raster.data.shape[0]:
+        raise ValueError(f"{intensity_path}: no level {level} (it has "
+                         f"{raster.data.shape[0]} band(s), levels 0..{raster.data.shape[0] - 1})")
+    return GeoRaster(raster.data[level].astype("float32"), raster.transform, raster.crs,
+                     raster.nodata)
+
+
+def ground_intensity_job(cloud_path, intensity_path, *, heights_path=None, cell_m=None,
+                         t_planar: float = 0.01, t_vert: float = 0.98,
+                         progress: Progress = None) -> dict:
+    """Stages 1-2 of the LiDAR method on a whole file: ground levels, intensity images.
+
+    Writes ``intensity_path`` (one band per ground level, in [0, 1], NaN where no ground),
+    ``<stem>_level_index.tif`` beside it and the per-level ground heights (``heights_path``,
+    default ``<stem>_ground_heights.tif`` beside it), in the cloud's metre working CRS. The
+    grid is the one :func:`gisroads.lidar.pipeline.extract_tile` uses over the same bounds.
+    The whole cloud is held in memory: for large files run the tiled pipeline.
+    """
+    from .io.las import read_las
+    from .lidar.ground import ground_planes
+    from .lidar.intensity import write_intensity_images
+    from .lidar.pipeline import auto_cell_m, ground_and_intensity
+
+    cloud = read_las(cloud_path)
+    if cloud.intensity is None:
+        raise ValueError(f"{cloud_path}: the point cloud records no intensity")
+    bounds = (*cloud.xyz[:, :2].min(axis=0), *cloud.xyz[:, :2].max(axis=0))
+    if cell_m is None:
+        cell_m = auto_cell_m(len(cloud), (bounds[2] - bounds[0]) * (bounds[3] - bounds[1]))
+    report(progress, 0.05, "ground planes")
+    planes = ground_planes(cloud.xyz, t_planar=t_planar, t_vert=t_vert)
+    report(progress, 0.7, "intensity images")
+    images, heights = ground_and_intensity(cloud, planes, bounds=bounds, cell_m=cell_m)
+    intensity, index = write_intensity_images(intensity_path, images)
+    heights_path = Path(heights_path or intensity.with_name(f"{intensity.stem}_ground_heights.tif"))
+    write_geotiff(heights_path, heights,
+                  band_names=[f"level_{k}" for k in range(heights.data.shape[0])])
+    report(progress, 1.0, "done")
+    return {"intensity": intensity, "level_index": index, "ground_heights": heights_path,
+            "levels": planes.n_levels, "cell_m": cell_m,
+            "ground_points": int((planes.level >= 0).sum()), "points": len(cloud)}
+
+
+def lidar_segmentation_job(intensity_path, segments_path, *, level: int = 0,
+                           n_segments: int = 150, edges_path=None) -> dict:
+    """Stage 3 on one level of an intensity GeoTIFF: local-energy edges and the NCut
+    over-segmentation, as in :func:`gisroads.lidar.pipeline.extract_tile`.
+
+    Writes ``segments_path`` (int32 labels, -1 = no data) and, when asked, ``edges_path``
+    (bands ``magnitude`` and ``orientation_rad``).
+    """
+    from .lidar.pipeline import edges_and_segments
+
+    image = _level_image(intensity_path, level)
+    magnitude, orientation, labels = edges_and_segments(image.data, n_segments=n_segments)
+    write_geotiff(segments_path, GeoRaster(labels.astype("int32"), image.transform, image.crs),
+                  nodata=-1, band_names=["segment"])
+    result = {"segments": Path(segments_path), "n_segments": int(labels.max()) + 1}
+    if edges_path is not None:
+        write_geotiff(edges_path, GeoRaster(np.stack([magnitude, orientation]).astype("float32"),
+                                            image.transform, image.crs),
+                      band_names=["magnitude", "orientation_rad"])
+        result["edges"] = Path(edges_path)
+    return result
+
+
+def likelihood_job(intensity_path, segments_path, likelihood_path, hypotheses_path, *,
+                   level: int = 0, progress: Progress = None, **options) -> dict:
+    """Stage 4: rectangle hypotheses of one level and their per-width likelihood maps.
+
+    The edges are recomputed from the intensity (the same deterministic local energy as
+    stage 3). ``options`` go to :func:`gisroads.lidar.hypotheses.road_hypotheses`
+    (``widths_m``, ``lengths_m``, ``t_bd``, ``t_int``, ...) and ``l_max`` to the maps.
+    Writes ``likelihood_path`` (one band per width) and ``hypotheses_path`` (GeoPackage,
+    layer ``hypotheses``).
+    """
+    from .features.edges import local_energy
+    from .lidar.hypotheses import DEFAULT_WIDTHS_M, L_MAX, likelihood_maps, road_hypotheses
+
+    image = _level_image(intensity_path, level)
+    segments = read_raster(segments_path)
+    if segments.data.shape[1:] != image.data.shape or segments.transform != image.transform:
+        raise ValueError(f"{segments_path} is not on the grid of {intensity_path}")
+    l_max = options.pop("l_max", L_MAX)
+    widths_m = tuple(options.get("widths_m", DEFAULT_WIDTHS_M))
+    report(progress, 0.05, "edges")
+    magnitude, orientation = local_energy(image.data)
+    report(progress, 0.2, "hypotheses")
+    hypotheses = road_hypotheses(image, magnitude, orientation, segments.data[0], **options)
+    if len(hypotheses) == 0:
+        raise ValueError(f"{intensity_path}: no valid road hypothesis on level {level}")
+    report(progress, 0.8, "likelihood maps")
+    maps = likelihood_maps(hypotheses, image, widths_m=widths_m, l_max=l_max)
+    write_geotiff(likelihood_path, maps, band_names=[f"width_{w:g}_m" for w in widths_m])
+    write_geopackage(hypotheses_path, {"hypotheses": hypotheses.assign(level=level)})
+    report(progress, 1.0, "done")
+    return {"likelihood": Path(likelihood_path), "hypotheses": Path(hypotheses_path),
+            "n_hypotheses": len(hypotheses)}
+
+
+def min_cover_job(hypotheses_path, likelihood_path, rectangles_path, *, exact: bool = False,
+                  progress: Progress = None, **options) -> dict:
+    """Stage 5: the minimum cover of the hypotheses (greedy, or the exact integer program
+    for small instances). ``hypotheses_path`` is a file (its ``hypotheses`` layer) or a
+    GeoDataFrame. ``options``: ``l_max``, ``a``, ``d_max`` (greedy only), ``seed_step_m``.
+    Writes ``rectangles_path`` (GeoPackage, layer ``rectangles``)."""
+    from .lidar.hypotheses import L_MAX
+    from .lidar.mincover import exact_min_cover, greedy_min_cover
+
+    hypotheses = _layer(hypotheses_path, "hypotheses")
+    missing = {"hyp_id", "theta_rad", "width_index", "width_m"} - set(hypotheses.columns)
+    if missing:
+        raise ValueError(f"{hypotheses_path}: not a hypotheses layer (no {sorted(missing)})")
+    likelihood = read_raster(likelihood_path)
+    if hypotheses.width_index.max() >= likelihood.data.shape[0]:
+        raise ValueError(f"{likelihood_path} has fewer width bands than the hypotheses use")
+    options.setdefault("l_max", L_MAX)
+    if exact:
+        options.pop("d_max", None)
+        selected = exact_min_cover(hypotheses, likelihood, **options)
+    else:
+        selected = greedy_min_cover(hypotheses, likelihood, progress=progress, **options)
+    if len(selected) == 0:
+        raise ValueError(f"{hypotheses_path}: the cover selected no rectangle")
+    write_geopackage(rectangles_path, {"rectangles": selected})
+    return {"rectangles": Path(rectangles_path), "n_rectangles": len(selected),
+            "cover_cost": float(selected.attrs["cover_cost"])}
+
+
+def rectangles_network_job(rectangles_path, out_path) -> dict:
+    """Stage 6: road rectangles (a file's ``rectangles`` layer, any polygon layer or a
+    GeoDataFrame with ``width_m`` and ``theta_rad``) to the road-network GeoPackage (centre
+    lines, polygons, junctions, and the rectangles)."""
+    from .vectorize.ribbons import rectangles_to_network
+
+    rectangles = _layer(rectangles_path, "rectangles")
+    missing = {"width_m", "theta_rad"} - set(rectangles.columns)
+    if missing:
+        raise ValueError(f"{rectangles_path}: the rectangles need fields {sorted(missing)}")
+    network = rectangles_to_network(rectangles)
+    if len(network.centrelines) == 0:
+        raise ValueError(f"{rectangles_path}: no road found")
+    network.qa = {"rectangles": rectangles}
+    write_geopackage(out_path, network.layers())
+    return {"gpkg": Path(out_path), "roads": len(network.centrelines),
+            "length_m": float(network.centrelines.length_m.sum()),
+            "junctions": len(network.junctions)}
 
 
 def tag_job(cloud_path, polygons_path, heights_path, out_path, *,

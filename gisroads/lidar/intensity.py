@@ -17,7 +17,10 @@ Rules, all vectorised:
   scan-line gap, up to ~0.6 m in real data, or the cells a thin object hid); it takes the
   Gaussian-weighted mean (normalised convolution, sigma = ``fill_radius_m / 2``, truncated
   at ``fill_radius_m``) of the data cells around it. Wider holes and the outside of the
-  data stay NaN.
+  data stay NaN. The default radius is 1.5 m, or 2.5 cells when cells are coarser than
+  0.6 m: a thinned cloud's coarse cells hold about one ground point each, and a third of
+  them are empty by chance (on the 0.29 pts/m² IGN tile at 1.9 m cells, 1.5 m filled
+  nothing and 34 % of the cells had a value; 5 m at 2 m cells gave 58 %).
 * **Level index**: the highest level with a value (after filling) at each cell, the ground
   seen from above; -1 where no level has one.
 """
@@ -82,7 +85,7 @@ def image_grid(bounds, cell_m: float) -> tuple[Affine, tuple[int, int]]:
 
 
 def intensity_images(xyz, intensity, level, *, cell_m: float = 0.5, bounds=None,
-                     crs: CRS | None = None, fill_radius_m: float = 1.5,
+                     crs: CRS | None = None, fill_radius_m: float | None = None,
                      percentiles: tuple[float, float] = (1.0, 99.0)) -> IntensityImages:
     """Project the intensities of the ground points to one image per ground level.
 
@@ -104,8 +107,9 @@ def intensity_images(xyz, intensity, level, *, cell_m: float = 0.5, bounds=None,
         ground points' bounds, every ground point inside.
     crs : pyproj.CRS, optional
         Stored with the rasters.
-    fill_radius_m : float
+    fill_radius_m : float, optional
         Widest gap filled, and reach of the data that fill it (metres); 0 fills nothing.
+        Default: ``max(1.5, 2.5 * cell_m)`` (see the module docstring).
     percentiles : (float, float)
         Percentiles of the raw intensity (0-100) mapped to 0 and 1.
 
@@ -120,6 +124,8 @@ def intensity_images(xyz, intensity, level, *, cell_m: float = 0.5, bounds=None,
         raise ValueError("xyz, intensity and level must have one entry per point")
     if cell_m <= 0:
         raise ValueError("cell_m must be positive")
+    if fill_radius_m is None:
+        fill_radius_m = max(1.5, 2.5 * cell_m)
     ground = level >= 0
     n_levels = int(level.max()) + 1 if ground.any() else 0
     if bounds is None:

@@ -22,10 +22,10 @@ from ..io.las import LasError, PointCloud, cloud_crs, las_info, read_las
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..vectorize.ribbons import rectangles_to_network, ribbons_to_network
-from .ground import ground_planes
+from .ground import GroundPlanes, ground_planes
 from .hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, likelihood_maps,
                          road_hypotheses)
-from .intensity import intensity_images
+from .intensity import IntensityImages, image_grid, intensity_images
 from .mincover import greedy_min_cover
 from .tagging import level_heights
 from .tiles import Tile, stitch_tiles, tile_grid
@@ -53,14 +53,30 @@ class LidarRoads:
     tiles: list[TileRoads] = field(default_factory=list)
 
 
-def _grid(bounds, cell_m: float) -> tuple[Affine, tuple[int, int]]:
-    """A north-up grid of ``cell_m`` over bounds snapped outward to multiples of the cell,
-    so the grids of all tiles align."""
-    xmin = np.floor(bounds[0] / cell_m) * cell_m
-    ymax = np.ceil(bounds[3] / cell_m) * cell_m
-    cols = int(np.ceil((bounds[2] - xmin) / cell_m))
-    rows = int(np.ceil((ymax - bounds[1]) / cell_m))
-    return Affine(cell_m, 0.0, xmin, 0.0, -cell_m, ymax), (rows, cols)
+def ground_and_intensity(cloud: PointCloud, planes: GroundPlanes, *, bounds, cell_m: float
+                         ) -> tuple[IntensityImages, GeoRaster]:
+    """Stage 2: the intensity image of every ground level and the ground height of every
+    level, on the grid of ``cell_m`` over ``bounds`` snapped outward to the cell (so that
+    the grids of all tiles align)."""
+    transform, shape = image_grid(bounds, cell_m)
+    grid_bounds = (transform.c, transform.f - shape[0] * cell_m,
+                   transform.c + shape[1] * cell_m, transform.f)
+    images = intensity_images(cloud.xyz, cloud.intensity, planes.level, cell_m=cell_m,
+                              bounds=grid_bounds, crs=cloud.crs)
+    heights = level_heights(cloud.xyz, planes.level, planes.n_levels, transform=transform,
+                            shape=shape, crs=cloud.crs)
+    return images, heights
+
+
+def edges_and_segments(image: np.ndarray, *, n_segments: int = 150
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stage 3 on one level's intensity image (NaN = no data): local-energy edge magnitude
+    and orientation, and the NCut over-segmentation (labels, -1 = no data)."""
+    magnitude, orientation = local_energy(image)
+    # intensity similarity only, as in the paper (section 4.3): on LiDAR the
+    # intervening-edge term lowered the recall of road edges by segment boundaries
+    labels = ncut_segmentation(image, n_segments=n_segments, mask=~np.isfinite(image))
+    return magnitude, orientation, labels
 
 
 def extract_tile(cloud: PointCloud, tile: Tile, *, cell_m: float = 0.5,
@@ -87,14 +103,8 @@ def extract_tile(cloud: PointCloud, tile: Tile, *, cell_m: float = 0.5,
         raise ValueError("the point cloud records no intensity; the LiDAR method needs it")
     report(progress, 0.0, "ground planes")
     planes = ground_planes(cloud.xyz, t_planar=t_planar, t_vert=t_vert)
-    transform, shape = _grid(tile.bounds, cell_m)
-    bounds = (transform.c, transform.f - shape[0] * cell_m,
-              transform.c + shape[1] * cell_m, transform.f)
     report(progress, 0.25, "intensity images")
-    images = intensity_images(cloud.xyz, cloud.intensity, planes.level, cell_m=cell_m,
-                              bounds=bounds, crs=cloud.crs)
-    heights = level_heights(cloud.xyz, planes.level, planes.n_levels, transform=transform,
-                            shape=shape, crs=cloud.crs)
+    images, heights = ground_and_intensity(cloud, planes, bounds=tile.bounds, cell_m=cell_m)
     rectangles, hypotheses, likelihood = [], [], []
     for level in range(planes.n_levels):
         image = images.image.data[level]
@@ -103,10 +113,7 @@ def extract_tile(cloud: PointCloud, tile: Tile, *, cell_m: float = 0.5,
         step = scaled(progress, 0.3 + 0.65 * level / planes.n_levels,
                       0.3 + 0.65 * (level + 1) / planes.n_levels)
         report(step, 0.0, f"level {level}: edges and NCut")
-        magnitude, orientation = local_energy(image)
-        # intensity similarity only, as in the paper (section 4.3): on LiDAR the
-        # intervening-edge term lowered the recall of road edges by segment boundaries
-        labels = ncut_segmentation(image, n_segments=n_segments, mask=~np.isfinite(image))
+        magnitude, orientation, labels = edges_and_segments(image, n_segments=n_segments)
         report(step, 0.4, f"level {level}: hypotheses")
         level_image = GeoRaster(image, images.image.transform, cloud.crs)
         hyps = road_hypotheses(level_image, magnitude, orientation, labels, widths_m=widths_m,
@@ -246,12 +253,12 @@ def assemble(results: list[TileRoads], *, crs, cell_m: float = 0.5) -> LidarRoad
 
 def _mosaic_cores(rasters: list[tuple[Tile, GeoRaster]], cell_m: float) -> GeoRaster:
     """One raster over all tiles, each cell taken from the tile whose core holds it. Tile
-    grids are aligned to multiples of ``cell_m`` (see :func:`_grid`)."""
+    grids are aligned to multiples of ``cell_m`` (see :func:`ground_and_intensity`)."""
     xmin = min(t.core[0] for t, _ in rasters)
     ymin = min(t.core[1] for t, _ in rasters)
     xmax = max(t.core[2] for t, _ in rasters)
     ymax = max(t.core[3] for t, _ in rasters)
-    transform, (rows, cols) = _grid((xmin, ymin, xmax, ymax), cell_m)
+    transform, (rows, cols) = image_grid((xmin, ymin, xmax, ymax), cell_m)
     bands = max(r.data.shape[0] for _, r in rasters)
     mosaic = np.full((bands, rows, cols), np.nan, np.float32)
     for tile, raster in rasters:  # one copy per tile

@@ -1,0 +1,68 @@
+"""LiDAR stage 3: local-energy edges and the NCut over-segmentation of an intensity image."""
+from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterNumber,
+                       QgsProcessingParameterRasterDestination,
+                       QgsProcessingParameterRasterLayer)
+
+from gisroads.jobs import lidar_segmentation_job
+
+from ..convert import gisroads_errors
+from .base import GisroadsAlgorithm
+
+
+def level_parameter(tr):
+    param = QgsProcessingParameterNumber("LEVEL", tr("Ground level (band - 1)"),
+                                         QgsProcessingParameterNumber.Integer, 0,
+                                         minValue=0, maxValue=20)
+    param.setHelp(tr("which level of the intensity image: 0 is the lowest ground (band 1), "
+                     "1 a bridge deck or terrace above it (band 2), ..."))
+    return param
+
+
+class LidarSegmentation(GisroadsAlgorithm):
+    NAME = "lidarsegmentation"
+    DISPLAY_NAME = "Edges and NCut segmentation (LiDAR)"
+    GROUP = "LiDAR"
+    HELP = (
+        "<p>Edge strength and orientation of one level of a LiDAR intensity image by local "
+        "energy (Morrone &amp; Owens: quadrature pairs of oriented filters), and its "
+        "over-segmentation into 100-200 regions by a normalized cut (Shi &amp; Malik) over a "
+        "graph of fine superpixels, with intensity-similarity affinities as in Zhu &amp; "
+        "Mordohai, section 4.3. The same NCut implementation segments aerial images in the "
+        "imagery pipeline.</p>"
+        "<p>Input: the intensity image of Ground planes and intensity image. Writes the "
+        "segment labels (GeoTIFF, -1 = no data) and optionally the edges (bands magnitude "
+        "and orientation in radians). Next stage: Road likelihood maps.</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        params = [
+            (QgsProcessingParameterRasterLayer("INPUT", self.tr("Intensity image")),
+             "the intensity GeoTIFF of Ground planes and intensity image"),
+            (QgsProcessingParameterNumber("SEGMENTS", self.tr("Number of segments"),
+                                          QgsProcessingParameterNumber.Integer, 150,
+                                          minValue=10, maxValue=1000),
+             "over-segmentation size (paper: 100-200)"),
+            (QgsProcessingParameterRasterDestination("OUTPUT", self.tr("Segments")),
+             "GeoTIFF of segment labels"),
+            (QgsProcessingParameterRasterDestination("EDGES", self.tr("Edges"), optional=True,
+                                                     createByDefault=False),
+             "optional GeoTIFF: edge magnitude and orientation (radians, from east)"),
+        ]
+        self.addParameter(params[0][0])
+        params[0][0].setHelp(self.tr(params[0][1]))
+        self.addParameter(level_parameter(self.tr))
+        for param, text in params[1:]:
+            param.setHelp(self.tr(text))
+            self.addParameter(param)
+        self.addOutput(QgsProcessingOutputNumber("N_SEGMENTS", self.tr("Segments made")))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
+        edges = self.parameterAsOutputLayer(parameters, "EDGES", context) or None
+        with gisroads_errors():
+            result = lidar_segmentation_job(
+                self.parameterAsRasterLayer(parameters, "INPUT", context).source(), out,
+                level=self.parameterAsInt(parameters, "LEVEL", context),
+                n_segments=self.parameterAsInt(parameters, "SEGMENTS", context),
+                edges_path=edges)
+        feedback.pushInfo(f"{result['n_segments']} segments")
+        return {"OUTPUT": out, "EDGES": edges, "N_SEGMENTS": result["n_segments"]}
