@@ -35,7 +35,7 @@ ours (module constants, all parameters):
   Direction difference is the angle between one end's outward direction and the reverse of
   the other's (0 for a straight continuation). Continuation smoothness is the lateral offset:
   the mean distance of each end from the other part's extension line, in metres. Both ends
-  must lie ahead of each other (no overlapping or backward links).
+  must lie ahead of each other, up to a small overlap (no backward links).
 - Relative distance is the gap over the sum of both parts' lengths.
 - The generation is greedy as in the paper: subgraphs grow from the best-quality part not yet
   used, always extending the best-quality part reached; an edge's ``from`` side is the part it
@@ -79,6 +79,9 @@ MAX_DIRECTION_DIFF_RAD = np.pi / 6
 MAX_LATERAL_OFFSET_M = 4.0
 #: Length of a part's end section that gives its direction at that end, metres.
 END_WINDOW_M = 10.0
+#: How far two linked ends may reach past each other, metres: centre lines extended to
+#: their segments' borders overlap by a pixel or two where two segments touch.
+MAX_OVERLAP_M = 2.0
 
 #: Linear weight functions ``w_R(f)``: feature -> (value of weight 1, value of weight 0);
 #: in between the weight is linear, outside it is clipped to [0, 1]. The "bad" ends lie
@@ -213,13 +216,15 @@ def gap_edges(road_parts: gpd.GeoDataFrame, *, max_gap_m: float = MAX_GAP_M,
               max_gap_relative: float = MAX_GAP_RELATIVE,
               max_direction_diff_rad: float = MAX_DIRECTION_DIFF_RAD,
               max_lateral_offset_m: float = MAX_LATERAL_OFFSET_M,
+              max_overlap_m: float = MAX_OVERLAP_M,
               end_window_m: float = END_WINDOW_M) -> gpd.GeoDataFrame:
     """Gap edges: hypotheses linking road-part ends (subgraph generation, Sec. 2.2.1).
 
     Two part ends are linked when the gap between them is at most ``max_gap_m`` and at most
     ``max_gap_relative`` times the sum of both parts' lengths, their direction difference is
     at most ``max_direction_diff_rad``, their lateral offset at most ``max_lateral_offset_m``,
-    and each end lies ahead of the other (see the module docstring for the definitions).
+    and each end lies ahead of the other or at most ``max_overlap_m`` behind it (see the
+    module docstring for the definitions).
     One end may be linked to several others: the competing branches are kept for
     :func:`select_gap_edges`.
 
@@ -231,6 +236,8 @@ def gap_edges(road_parts: gpd.GeoDataFrame, *, max_gap_m: float = MAX_GAP_M,
         ... (0..1; or ``mean_intensity``) for the colour difference.
     max_gap_m, max_gap_relative, max_direction_diff_rad, max_lateral_offset_m : float
         Link criteria (metres, ratio, radians, metres).
+    max_overlap_m : float
+        Metres.
     end_window_m : float
         Length of the end section giving a part's direction at an end, metres.
 
@@ -265,10 +272,9 @@ def gap_edges(road_parts: gpd.GeoDataFrame, *, max_gap_m: float = MAX_GAP_M,
     ahead_j = -np.einsum("ij,ij->i", d, outward[j])
     lateral = (np.abs(_cross(outward[i], d)) + np.abs(_cross(outward[j], d))) / 2.0
     direction = np.arccos(np.clip(-np.einsum("ij,ij->i", outward[i], outward[j]), -1, 1))
-    tolerance = 1e-9 * max(1.0, float(np.abs(xy).max()))
     keep = ((distance <= max_gap_m)
             & (distance <= max_gap_relative * (length[i // 2] + length[j // 2]))
-            & (ahead_i >= -tolerance) & (ahead_j >= -tolerance)
+            & (ahead_i >= -max_overlap_m) & (ahead_j >= -max_overlap_m)
             & (direction <= max_direction_diff_rad) & (lateral <= max_lateral_offset_m))
     i, j, distance, lateral, direction = (a[keep] for a in (i, j, distance, lateral, direction))
     if len(i) == 0:

@@ -7,8 +7,8 @@ from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutpu
 
 from gisroads.imagery.cues import image_cues, normalised_dsm
 from gisroads.imagery.subgraph import (MAX_DIRECTION_DIFF_RAD, MAX_GAP_M, MAX_GAP_RELATIVE,
-                                       MAX_LATERAL_OFFSET_M, SMALL_GAP_M, context_rasters,
-                                       link_road_parts)
+                                       MAX_LATERAL_OFFSET_M, MAX_OVERLAP_M, SMALL_GAP_M,
+                                       context_rasters, link_road_parts)
 from gisroads.io.raster import read_raster
 
 from ..convert import (frame_to_sink, gisroads_errors, progress_callback, source_to_frame,
@@ -74,6 +74,10 @@ class SubgraphLinking(GisroadsAlgorithm):
                                           MAX_LATERAL_OFFSET_M, minValue=0.0),
              "continuation smoothness: how far an end may lie beside the other part's "
              "extension"),
+            (QgsProcessingParameterNumber("MAX_OVERLAP",
+                                          self.tr("Largest overlap of linked ends (metres)"),
+                                          double, MAX_OVERLAP_M, minValue=0.0),
+             "how far two linked ends may reach past each other (touching segments)"),
             (QgsProcessingParameterNumber("SMALL_GAP",
                                           self.tr("Small gap: context ignored below (metres)"),
                                           double, SMALL_GAP_M, minValue=0.0),
@@ -125,7 +129,9 @@ class SubgraphLinking(GisroadsAlgorithm):
                     "max_direction_diff_rad": np.radians(
                         self.parameterAsDouble(parameters, "MAX_DIRECTION", context)),
                     "max_lateral_offset_m": self.parameterAsDouble(parameters, "MAX_LATERAL",
-                                                                   context)},
+                                                                   context),
+                    "max_overlap_m": self.parameterAsDouble(parameters, "MAX_OVERLAP",
+                                                            context)},
                 weight_options={"small_gap_m": self.parameterAsDouble(parameters, "SMALL_GAP",
                                                                       context)})
         outputs = {}

@@ -72,6 +72,14 @@ def test_gap_edges_respect_each_criterion():
     lanes = parts_frame([(1, [(0, 0), (50, 0)], 6, 0.9, 0.4, 0.4),
                          (2, [(40, 3), (90, 3)], 6, 0.9, 0.4, 0.4)])
     assert len(gap_edges(lanes, max_lateral_offset_m=10)) == 0
+    # centre lines reaching a metre past each other still link, three metres do not
+    overlap = parts_frame([(1, [(0, 0), (50, 0)], 6, 0.9, 0.4, 0.4),
+                           (2, [(49, 0.5), (90, 0.5)], 6, 0.9, 0.4, 0.4)])
+    linked = gap_edges(overlap)
+    assert len(linked) == 1 and linked.distance_m[0] == pytest.approx(np.hypot(1, 0.5))
+    assert len(gap_edges(overlap, max_overlap_m=0.5)) == 0
+    assert len(gap_edges(parts_frame([(1, [(0, 0), (50, 0)], 6, 0.9, 0.4, 0.4),
+                                      (2, [(47, 0.5), (90, 0.5)], 6, 0.9, 0.4, 0.4)]))) == 0
 
 
 def test_subgraphs_grow_greedily_from_the_best_part():
@@ -386,7 +394,7 @@ def test_synthetic_scene_links_road_gaps_and_rejects_links_through_buildings(sce
     true_link, false_link, through_building, n_true = _score_links(parts, gaps)
     assert n_true == 31 and true_link.sum() == n_true          # every road gap hypothesised
     assert gaps.selected[true_link].all()                      # ... and kept
-    assert false_link.sum() == 31 and not gaps.selected[false_link].any()  # branches lose
+    assert false_link.sum() >= 31 and not gaps.selected[false_link].any()  # branches lose
     assert through_building.sum() == 37                        # one per building
     assert (gaps.n_building[through_building] == 1).all()
     assert (gaps.weight[through_building] == 0).all()
