@@ -174,8 +174,10 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
 
     report(progress, 0.5, "extracting the subclouds")
     roads = registered.lines["road_id"].to_numpy()
-    first = {int(r): int(np.searchsorted(road_of, r)) for r in roads}
-    trees = {int(r): cKDTree(xyz[road_of == r, :2]) for r in roads}
+    bounds = np.flatnonzero(np.diff(road_of)) + 1
+    spans = dict(zip(road_of[np.concatenate([[0], bounds])].tolist(),
+                     np.split(np.arange(n), bounds)))  # each road's samples
+    trees = {r: cKDTree(xyz[span, :2]) for r, span in spans.items()}
     found: dict[int, list] = {int(r): [] for r in roads}
     for offset, chunk in iter_source(source, chunk_size=chunk_size):
         report(progress, 0.5, f"subclouds: {offset + len(chunk)} points read")
@@ -191,7 +193,7 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
             distance, nearest = trees[r].query(chunk.xyz[local, :2], distance_upper_bound=reach_m)
             hit = np.isfinite(distance)
             local, nearest = local[hit], nearest[hit]
-            s = first[r] + nearest
+            s = spans[r][nearest]
             dx, dy = (chunk.xyz[local, :2] - xyz[s, :2]).T
             residual = chunk.xyz[local, 2] - xyz[s, 2] - (planes[s, 0] + planes[s, 1] * dx
                                                           + planes[s, 2] * dy)
@@ -206,7 +208,7 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
         points, intensity, nearest, point_index = (
             np.concatenate(column) for column in zip(*(found[int(r)] or [none])))
         order = np.argsort(point_index, kind="stable")  # the source's order
-        s = np.flatnonzero(road_of == r)
+        s = spans[int(r)]
         patches.append(RoadPatch(
             road_id=int(r), samples_xyz=xyz[s], tangent=tangent[s], plane_normal=normal[s],
             plane_z=xyz[s, 2] + planes[s, 0], points=points[order],
