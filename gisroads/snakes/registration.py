@@ -161,7 +161,9 @@ def map_topology(lines: gpd.GeoDataFrame, *, snap_m: float = SNAP_M) -> MapTopol
     n = len(parts)
     ends = np.array([[c[0], c[-1]] for c in parts]).reshape(-1, 2)  # 2 per part
     label = _cluster(ends, snap_m)
-    centres = np.array([ends[label == k].mean(axis=0) for k in range(label.max() + 1)])
+    size = np.bincount(label)
+    centres = np.column_stack([np.bincount(label, ends[:, 0]) / size,
+                               np.bincount(label, ends[:, 1]) / size])
 
     # (b) T junctions: split positions per part, as (distance along, node).
     splits: list[list[tuple[float, int]]] = [[] for _ in range(n)]
@@ -189,12 +191,17 @@ def map_topology(lines: gpd.GeoDataFrame, *, snap_m: float = SNAP_M) -> MapTopol
     for members in (groups[key] for key in np.flatnonzero(counts > 1)):
         if len(np.unique(part_of[members])) < 2:
             continue
-        node = len(centres)
-        centres.append(vertices[members[0]])
-        for v in members:
-            j = part_of[v]
-            splits[j].append((float(shapely.line_locate_point(
-                geoms[j], shapely.points(vertices[v]))), node))
+        at = [float(shapely.line_locate_point(geoms[part_of[v]], shapely.points(vertices[v])))
+              for v in members]
+        # A line end on the same vertex already made a node there (b): join it.
+        known = [k for v, a in zip(members, at) for b, k in splits[part_of[v]]
+                 if abs(a - b) < 1e-3]
+        node = known[0] if known else len(centres)
+        if not known:
+            centres.append(vertices[members[0]])
+        for v, a in zip(members, at):
+            if not any(abs(a - b) < 1e-3 for b, _ in splits[part_of[v]]):
+                splits[part_of[v]].append((a, node))
     centres = np.asarray(centres)
 
     pieces, start_node, end_node, source = [], [], [], []

@@ -47,6 +47,16 @@ def test_topology_of_a_hand_made_map():
     assert len(d) == 1 and shapely.length(d.geometry.values[0]) == pytest.approx(60)
 
 
+def test_an_end_on_a_shared_crossing_vertex_makes_one_intersection():
+    topo = map_topology(lines_frame([(0, 0), (10, 0), (20, 0)], [(10, -10), (10, 0), (10, 10)],
+                                    [(10, 0), (15, 8)]))
+    nodes = shapely.get_coordinates(topo.intersections.geometry.values)
+    centre = np.flatnonzero(np.all(np.abs(nodes - (10, 0)) < 1e-9, axis=1))
+    assert len(centre) == 1
+    assert topo.intersections["degree"].iloc[centre[0]] == 5
+    assert len(topo.roads) == 5
+
+
 def test_bad_maps_are_refused():
     with pytest.raises(ValueError, match="LineString"):
         map_topology(gpd.GeoDataFrame(geometry=[shapely.points(0, 0)], crs="EPSG:32633"))
