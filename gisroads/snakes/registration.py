@@ -481,6 +481,9 @@ def register_map(lines: gpd.GeoDataFrame, cloud: PointCloud, *, control_spacing_
                           .in_corridor(cloud.xyz[:, :2]))
     sample, point = _neighbours(cloud.xyz[near, :2], samples.xy, support_radius_m)
     point = near[point]
+    if len(point) == 0:
+        raise ValueError(f"no point lies within {support_radius_m} m of the map's samples; "
+                         "does the map cover the cloud (same CRS)?")
     z = cloud.xyz[point, 2]
 
     report(progress, 0.4, "separating levels")

@@ -65,6 +65,8 @@ def test_bad_maps_are_refused():
     with pytest.raises(ValueError, match="no point"):
         register_map(lines_frame([(0, 0), (10, 0)]),
                      PointCloud(np.empty((0, 3)), None, *[np.empty(0, np.uint8)] * 3))
+    with pytest.raises(ValueError, match="does the map cover the cloud"):
+        register_map(lines_frame([(1000, 0), (1010, 0)]), grid_cloud(lambda x, y: x))
     with pytest.raises(ValueError, match="support_radius_m"):
         register_map(lines_frame([(0, 0), (10, 0)]), grid_cloud(lambda x, y: x),
                      support_radius_m=0)
