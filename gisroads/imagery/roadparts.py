@@ -523,43 +523,53 @@ def filter_road_parts(segments: gpd.GeoDataFrame, *,
         One LineString per passing segment, its centre line: ``part_id``, ``segment_id``,
         ``width_m``, ``length_m``, ``quality``, ``mean_b1`` ..., ``mean_intensity``.
     """
-    low_w, high_w = width_range_m
-    low_i, high_i = intensity_range
+    out = segments.assign(**_verdict(segments, dict(
+        width_range_m=width_range_m, min_length_m=min_length_m, elongation_min=elongation_min,
+        convexity_min=convexity_min, elongation_curved_min=elongation_curved_min,
+        convexity_curved_min=convexity_curved_min, width_constancy_min=width_constancy_min,
+        height_max_m=height_max_m, ndvi_max=ndvi_max, intensity_range=intensity_range,
+        intensity_std_max=intensity_std_max, road_width_m=road_width_m)))
+    return out, _road_part_layer(out)
+
+
+def _verdict(segments: pd.DataFrame, criteria: dict) -> dict:
+    """``passed``, ``reason``, ``failures`` and ``quality`` of measured segments under a
+    full set of criteria (the keys of :data:`CRITERIA`)."""
+    c = criteria
+    (low_w, high_w), (low_i, high_i) = c["width_range_m"], c["intensity_range"]
     if not (0 < low_w < high_w and low_i < high_i):
         raise ValueError("width_range_m and intensity_range must be (min, max) with "
                          "min < max, widths positive")
-    if not elongation_min < elongation_curved_min:
+    if not c["elongation_min"] < c["elongation_curved_min"]:
         raise ValueError("elongation_curved_min must exceed elongation_min")
-    if min_length_m <= 0:
+    if c["min_length_m"] <= 0:
         raise ValueError("min_length_m must be positive")
-    s = {c: segments[c].to_numpy(float) for c in SEGMENT_COLUMNS[1:]}
+    s = {name: segments[name].to_numpy(float) for name in SEGMENT_COLUMNS[1:]}
     width = s["width_m"]
-    needed = np.interp(s["elongation"], [elongation_min, elongation_curved_min],
-                       [convexity_min, convexity_curved_min])
+    needed = np.interp(s["elongation"], [c["elongation_min"], c["elongation_curved_min"]],
+                       [c["convexity_min"], c["convexity_curved_min"]])
     failing = {
-        "not elongated": s["elongation"] < elongation_min,
+        "not elongated": s["elongation"] < c["elongation_min"],
         "not convex": s["convexity"] < needed,
         "too narrow": np.isnan(width) | (width < low_w),
         "too wide": width > high_w,
-        "irregular width": s["width_constancy"] < width_constancy_min,
-        "too short": np.isnan(s["length_m"]) | (s["length_m"] < min_length_m),
-        "too high": s["height_m"] > height_max_m,
-        "vegetation": s["ndvi"] > ndvi_max,
+        "irregular width": s["width_constancy"] < c["width_constancy_min"],
+        "too short": np.isnan(s["length_m"]) | (s["length_m"] < c["min_length_m"]),
+        "too high": s["height_m"] > c["height_max_m"],
+        "vegetation": s["ndvi"] > c["ndvi_max"],
         "too dark": s["mean_intensity"] < low_i,
         "too bright": s["mean_intensity"] > high_i,
-        "textured": s["std_intensity"] > intensity_std_max,
+        "textured": s["std_intensity"] > c["intensity_std_max"],
     }
-    fails = np.column_stack([failing[name] for name in TESTS]) if len(segments) else \
-        np.zeros((0, len(TESTS)), bool)
+    fails = np.column_stack([failing[name] for name in TESTS]).reshape(-1, len(TESTS))
     names = np.array(TESTS, dtype=object)
-    out = segments.copy()
-    out["passed"] = ~fails.any(axis=1)
-    out["reason"] = np.where(out["passed"], "", names[np.argmax(fails, axis=1)]) \
-        if len(out) else pd.Series(dtype=object)
-    out["failures"] = [", ".join(names[row]) for row in fails]
-    out["quality"] = road_part_quality(out, road_width_m=road_width_m,
-                                       width_range_m=width_range_m, ndvi_max=ndvi_max)
-    return out, _road_part_layer(out)
+    passed = ~fails.any(axis=1)
+    return {"passed": passed,
+            "reason": np.where(passed, "", names[np.argmax(fails, axis=1)]).astype(object),
+            "failures": np.array([", ".join(names[row]) for row in fails], dtype=object),
+            "quality": road_part_quality(segments, road_width_m=c["road_width_m"],
+                                         width_range_m=c["width_range_m"],
+                                         ndvi_max=c["ndvi_max"])}
 
 
 def _road_part_layer(segments: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
@@ -610,13 +620,36 @@ def rasterize_segments(segments: gpd.GeoDataFrame, like: GeoRaster, *,
 
 
 def _adjacent_pairs(labels: np.ndarray) -> np.ndarray:
-    """Pairs ``(a, b)``, ``a < b``, of 4-adjacent segment ids."""
-    pairs = []
+    """Pairs ``(a, b)``, ``a < b``, of 4-adjacent segment ids, shape ``(n, 2)``."""
+    low, high = [], []
     for a, b in ((labels[:, :-1], labels[:, 1:]), (labels[:-1], labels[1:])):
         touch = (a != b) & (a >= 0) & (b >= 0)
-        pairs.append(np.column_stack([np.minimum(a[touch], b[touch]),
-                                      np.maximum(a[touch], b[touch])]))
-    return np.unique(np.concatenate(pairs), axis=0)
+        low.append(np.minimum(a[touch], b[touch]))
+        high.append(np.maximum(a[touch], b[touch]))
+    low, high = np.concatenate(low).astype(np.int64), np.concatenate(high).astype(np.int64)
+    span = int(high.max()) + 1 if len(high) else 1
+    keys = np.unique(low * span + high)  # one sortable key per pair
+    return np.column_stack([keys // span, keys % span])
+
+
+def _relabel(labels: np.ndarray, source: np.ndarray, target: np.ndarray, *,
+             others: int | None = None) -> np.ndarray:
+    """``labels`` with ids ``source`` replaced by ``target``; every other pixel keeps its
+    id, or becomes ``others`` when given."""
+    order = np.argsort(source)
+    source, target = np.asarray(source)[order], np.asarray(target)[order]
+    if not len(source):
+        return labels.copy() if others is None else np.full_like(labels, others)
+    where = np.clip(np.searchsorted(source, labels), 0, len(source) - 1)
+    hit = source[where] == labels
+    rest = labels if others is None else others
+    return np.where(hit, target[where], rest).astype(labels.dtype)
+
+
+def _window(mask: np.ndarray):
+    """The bounding rows and columns of a mask's pixels as a pair of slices."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    return slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)
 
 
 def _crop(cues: ImageCues, window) -> ImageCues:
@@ -636,7 +669,8 @@ def merge_adjacent_parts(segments: gpd.GeoDataFrame, labels, image: GeoRaster,
     Pairs of passing parts that share a border and whose main directions differ by at most
     ``max_direction_diff_rad`` are tried, most similar first; a merge is kept when the
     union, measured afresh, passes :func:`filter_road_parts` (Grote & Rottensteiner 2010,
-    Section 2.1.3). Rounds repeat until no pair merges, so chains of parts merge too.
+    Section 2.1.3). Each round tries a set of disjoint pairs, all measured together;
+    rounds repeat until no pair merges, so chains of parts merge too.
 
     Parameters
     ----------
@@ -661,50 +695,57 @@ def merge_adjacent_parts(segments: gpd.GeoDataFrame, labels, image: GeoRaster,
     labels : ndarray
         The label image with the merges applied.
     """
-    criteria = dict(criteria or {})
+    unknown = set(criteria or {}) - set(CRITERIA)
+    if unknown:
+        raise ValueError(f"unknown road-part criteria {sorted(unknown)}; "
+                         f"choose from {sorted(CRITERIA)}")
+    criteria = {**CRITERIA, **(criteria or {})}
     pixel_m = _metric_pixel(image)
     labels = _check_labels(labels, image.shape).copy()
     segments = segments.copy()
     if "merged_from" not in segments:
         segments["merged_from"] = ""
+    refused = set()  # pairs whose union failed; retried only once one of them has grown
     while True:
-        passing = segments["segment_id"].to_numpy()[segments["passed"].to_numpy(bool)]
+        by_id = segments.set_index("segment_id")
+        passing = by_id.index.to_numpy()[by_id["passed"].to_numpy(bool)]
         pairs = _adjacent_pairs(labels)
         pairs = pairs[np.isin(pairs, passing).all(axis=1)]
-        if not len(pairs):
-            return segments.reset_index(drop=True), labels
-        by_id = segments.set_index("segment_id")
         diff = np.abs(by_id.loc[pairs[:, 0], "direction_rad"].to_numpy()
                       - by_id.loc[pairs[:, 1], "direction_rad"].to_numpy())
         diff = np.minimum(diff, np.pi - diff)
         order = np.argsort(diff, kind="stable")
-        pairs = pairs[order][diff[order] <= max_direction_diff_rad]
-        touched, merged_any = set(), False
-        for a, b in pairs:
-            if a in touched or b in touched:
-                continue
-            both = (labels == a) | (labels == b)
-            window = ndimage.find_objects(both.astype(np.int8))[0]
-            local = np.where(both[window], a, -1).astype(labels.dtype)
-            t, r0, c0 = image.transform, window[0].start, window[1].start
-            origin = Affine(t.a, t.b, t.c + t.a * c0 + t.b * r0,
-                            t.d, t.e, t.f + t.d * c0 + t.e * r0)
-            merged = _measure(local, _crop(cues, window), origin, image.crs, pixel_m,
-                              MAX_WIDTH_M)
-            merged, _ = filter_road_parts(merged, **criteria)
-            if not merged["passed"].iloc[0]:
-                continue
-            pieces = [by_id.loc[k, "merged_from"] or str(k) for k in (a, b)]
-            merged["merged_from"] = ",".join(sorted(",".join(pieces).split(","), key=int))
-            labels[labels == b] = a
-            keep = ~segments["segment_id"].isin([a, b]).to_numpy()
-            segments = pd.concat([segments[keep], merged[segments.columns]],
-                                 ignore_index=True)
-            touched.update((a, b))
-            merged_any = True
-        segments = segments.sort_values("segment_id").reset_index(drop=True)
-        if not merged_any:
-            return segments, labels
+        chosen, used = [], set()
+        for a, b in pairs[order][diff[order] <= max_direction_diff_rad].tolist():
+            if a not in used and b not in used and (a, b) not in refused:
+                chosen.append((a, b))
+                used.update((a, b))
+        if not chosen:
+            return segments.reset_index(drop=True), labels
+        first, second = np.array(chosen).T
+        unions = _relabel(labels, np.r_[first, second], np.r_[first, first], others=-1)
+        window = _window(unions >= 0)
+        t, r0, c0 = image.transform, window[0].start, window[1].start
+        origin = Affine(t.a, t.b, t.c + t.a * c0 + t.b * r0,
+                        t.d, t.e, t.f + t.d * c0 + t.e * r0)
+        rows = _measure(unions[window], _crop(cues, window), origin, image.crs, pixel_m,
+                        MAX_WIDTH_M)
+        rows = rows.assign(**_verdict(rows, criteria))
+        partner = dict(chosen)
+        refused.update((a, partner[a]) for a in rows["segment_id"][~rows["passed"]])
+        rows = rows[rows["passed"].to_numpy()]
+        if not len(rows):
+            return segments.reset_index(drop=True), labels
+        kept = rows["segment_id"].to_numpy()
+        grown = set(kept.tolist()) | {partner[a] for a in kept.tolist()}
+        refused = {pair for pair in refused if grown.isdisjoint(pair)}
+        rows = rows.assign(merged_from=[",".join(sorted(
+            ",".join(by_id.loc[k, "merged_from"] or str(k) for k in (a, partner[a])).split(","),
+            key=int)) for a in kept.tolist()])
+        labels = _relabel(labels, np.array([partner[a] for a in kept.tolist()]), kept)
+        segments = pd.concat([segments[~segments["segment_id"].isin(grown).to_numpy()],
+                              rows[segments.columns]],
+                             ignore_index=True).sort_values("segment_id")
 
 
 class RoadParts(NamedTuple):

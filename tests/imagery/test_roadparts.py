@@ -154,21 +154,23 @@ def test_dark_shadow_and_textured_strips_fail():
 
 
 def test_collinear_adjacent_parts_merge_and_a_crossing_part_does_not():
-    _, west = _strip(40, 75, 8.0, 60.0, 0.0)     # x 10..70
-    _, east = _strip(100, 75, 8.0, 60.0, 0.0)    # x 70..130, touching west
-    _, north = _strip(100, 111, 8.0, 64.0, 90.0)  # touches east from the north, at 90 deg
-    labels, image = _paint([(west, ASPHALT), (east, ASPHALT), (north, ASPHALT)])
+    _, west = _strip(30, 75, 8.0, 40.0, 0.0)      # x 10..50
+    _, middle = _strip(70, 75, 8.0, 40.0, 1.0)    # x 50..90, touching west, 1 degree off
+    _, east = _strip(110, 75, 8.0, 40.0, 0.0)     # x 90..130, touching middle
+    _, north = _strip(70, 111, 8.0, 64.0, 90.0)   # touches the middle from the north
+    labels, image = _paint([(west, ASPHALT), (middle, ASPHALT), (east, ASPHALT),
+                            (north, ASPHALT)])
     result = extract_road_parts(labels, image)
     merged = _row(result.segments, 1)
-    assert merged.merged_from == "1,2"
+    assert merged.merged_from == "1,2,3"          # a chain: merged over two rounds
     assert merged.length_m == pytest.approx(120.0, rel=0.05)
-    assert merged.passed and 2 not in set(result.segments.segment_id)
-    assert sorted(result.road_parts.segment_id) == [1, 3]
-    assert (result.labels == 2).sum() == 0 and (result.labels == 1).sum() == (
-        (labels == 1) | (labels == 2)).sum()
-    assert _row(result.segments, 3).merged_from == ""
+    assert merged.passed and list(result.segments.segment_id) == [0, 1, 4]
+    assert sorted(result.road_parts.segment_id) == [1, 4]
+    assert (result.labels == 1).sum() == np.isin(labels, [1, 2, 3]).sum()
+    assert not np.isin(result.labels, [2, 3]).any()
+    assert _row(result.segments, 4).merged_from == ""
     unmerged = extract_road_parts(labels, image, merge=False)
-    assert sorted(unmerged.road_parts.segment_id) == [1, 2, 3]
+    assert sorted(unmerged.road_parts.segment_id) == [1, 2, 3, 4]
 
 
 def test_merge_is_refused_when_the_union_fails():
