@@ -47,7 +47,7 @@ from skimage.segmentation import watershed
 from .geo import GeoRaster
 from .lidar.hypotheses import L_MAX
 from .progress import Progress, report, scaled
-from .segmentation.ncut import _leading_eigenvectors, ncut  # NCut's own eigensolver
+from .segmentation.ncut import leading_eigenpairs, ncut
 
 MAX_EDGE_M = 80.0
 """Nodes closer than this are joined (paper, section 5: 80 m)."""
@@ -281,15 +281,6 @@ MAX_BLOCKS_PER_REGION = 12
 a group of blocks joined through missed road segments)."""
 
 
-def _leading_eigenvalues(weights: sparse.csr_matrix, n_eigen: int, seed: int) -> np.ndarray:
-    """The ``n_eigen`` largest eigenvalues of ``D^-1/2 W D^-1/2``, descending (W connected),
-    from NCut's own eigensolver."""
-    vectors = _leading_eigenvectors(weights, n_eigen, seed)
-    scaling = sparse.diags(1.0 / np.sqrt(np.asarray(weights.sum(axis=1)).ravel()))
-    normalized = scaling @ weights @ scaling
-    return np.sort(np.einsum("ij,ij->j", vectors, normalized @ vectors))[::-1]
-
-
 def block_segments(affinity, *, road_weight: float, n_blocks: int | None = None,
                    seed: int = 0) -> np.ndarray:
     """Multiway normalized cut of W into blocks, with the number of blocks from eigengaps.
@@ -342,9 +333,10 @@ def block_segments(affinity, *, road_weight: float, n_blocks: int | None = None,
         if len(members) < 4:
             spectra.append(np.ones(1))
         else:
-            spectra.append(_leading_eigenvalues(
-                weights[members][:, members],
-                min(len(members) - 2, MAX_BLOCKS_PER_REGION + 1), seed))
+            values, _ = leading_eigenpairs(weights[members][:, members],
+                                           min(len(members) - 2, MAX_BLOCKS_PER_REGION + 1),
+                                           seed=seed)
+            spectra.append(values[::-1])
     if n_blocks is None:
         counts = [1 if len(ev) < 2 else int(np.argmax(ev[:-1] - ev[1:])) + 1
                   for ev in spectra]
