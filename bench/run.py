@@ -29,6 +29,16 @@ snakes_registration
     registering, and extracting the subclouds chunk by chunk from the LAZ; the 95th
     percentile |dz| of the seen samples against the surface. Baseline: nearest-point
     elevation of every sample (a cKDTree query), no levels and no spline.
+imagery_real
+    Every image of ../shared/data/imagery (gisroads.imagery.datasets) through the naive
+    threshold-morphology-skeleton baseline and, once it exists, the imagery pipeline:
+    completeness, correctness and quality per image and on average (buffer 3 m,
+    Massachusetts 4 m, no-data excluded), seconds, per-stage seconds, a quick-look per image
+    and method in OUT/imagery/, the table in OUT/imagery_real.md.
+imagery_tile
+    The imagery pipeline on a 1000 x 1000 synthetic RGB tile (0.3 m) on one core, per-stage
+    seconds and scores against the scene's truth, beside the baseline; skipped while
+    gisroads.imagery.pipeline does not exist.
 """
 from __future__ import annotations
 
@@ -218,6 +228,147 @@ def case_lidar_real(out: Path, data_dir: str) -> dict:
     return results
 
 
+def _image_pipeline():
+    """``extract_image_roads`` of the imagery pipeline, or None while its module is missing."""
+    try:
+        from gisroads.imagery.pipeline import extract_image_roads
+    except ModuleNotFoundError as err:
+        if err.name != "gisroads.imagery.pipeline":
+            raise
+        return None
+    return extract_image_roads
+
+
+def _image_baseline(image):
+    from gisroads.imagery.baseline import baseline_roads
+    return baseline_roads(image), {}
+
+
+_SCORES = ("completeness", "correctness", "quality")
+
+
+def _imagery_table(per_image: dict, methods) -> str:
+    """Markdown: per image and on average, each method's scores and seconds."""
+    head = "| image | pixel m | buffer m | " + " | ".join(
+        f"{m} {k}" for m in methods for k in ("C", "K", "Q", "s")) + " |"
+    lines = [head, "|" + "---|" * (3 + 4 * len(methods))]
+    for name, entry in per_image.items():
+        cells = [f"{entry.get(f'{m}_{k}', float('nan')):.3f}" for m in methods
+                 for k in (*_SCORES, "s")]
+        label = name if entry["scored"] else f"{name} (edge case, unscored)"
+        lines.append(f"| {label} | {entry['pixel_m']} | {entry['buffer_m']} | "
+                     + " | ".join(cells) + " |")
+    scored = [e for e in per_image.values() if e["scored"]]
+    means = [f"{np.nanmean([e[f'{m}_{k}'] for e in scored]):.3f}" for m in methods
+             for k in (*_SCORES, "s")]
+    lines.append(f"| **mean of {len(scored)}** | | | " + " | ".join(means) + " |")
+    if "pipeline" in methods:
+        quality = [np.nanmean([e[f"{m}_quality"] for e in scored]) for m in methods]
+        lines += ["", f"Mean quality: pipeline {quality[1]:.3f}, baseline {quality[0]:.3f}, "
+                      f"ratio {quality[1] / quality[0]:.2f} (target >= 1.5)."]
+    stages = list(dict.fromkeys(k for e in per_image.values() for k in e
+                                if k.startswith("stage_")))
+    if stages:
+        lines += ["", "| image | " + " | ".join(stages) + " |",
+                  "|" + "---|" * (1 + len(stages))]
+        lines += [f"| {name} | " + " | ".join(f"{e.get(k, float('nan')):.2f}" for k in stages)
+                  + " |" for name, e in per_image.items()]
+    return "\n".join(lines) + "\n"
+
+
+def case_imagery_real(out: Path, data_dir: str, datasets=None) -> dict:
+    """Every real benchmark image through the naive baseline and, once it exists, the
+    imagery pipeline: buffer scores against the truth, times, quick-looks."""
+    import geopandas as gpd
+
+    from gisroads.evaluate import buffer_metrics, match_layers
+    from gisroads.imagery.datasets import DATASETS, benchmark_images
+    from gisroads.io.quicklook import evaluation_layers, write_quicklook
+
+    methods = {"baseline": _image_baseline, "pipeline": _image_pipeline()}
+    if methods["pipeline"] is None:
+        del methods["pipeline"]
+    looks = out / "imagery"
+    looks.mkdir(exist_ok=True)
+    per_image = {}
+    for record in benchmark_images(data_dir, datasets=datasets or DATASETS):
+        entry = {"pixel_m": record.pixel_m, "buffer_m": record.buffer_m,
+                 "scored": record.scored, "truth_km": float(record.truth.length.sum() / 1000)}
+        valid = gpd.GeoDataFrame(geometry=[record.valid_area.boundary], crs=record.image.crs)
+        for method, run in methods.items():
+            (network, qa), seconds = _timed(run, record.image)
+            lines = network.centrelines
+            entry[f"{method}_s"] = seconds
+            entry[f"{method}_km"] = float(lines.length.sum() / 1000)
+            if method == "pipeline":
+                entry.update({f"stage_{k}_s": v for k, v in qa.get("timings_s", {}).items()})
+            layers = [(valid, dict(color="cyan", linewidth=1, label="valid area"))]
+            if record.scored:
+                match = dict(buffer_m=record.buffer_m, valid_area=record.valid_area)
+                scores = buffer_metrics(lines, record.truth, **match)
+                entry.update({f"{method}_{k}": getattr(scores, k) for k in _SCORES})
+                layers += evaluation_layers(match_layers(lines, record.truth, **match))
+                title = (f"{record.name} {method}: completeness {scores.completeness:.2f}, "
+                         f"correctness {scores.correctness:.2f}, quality {scores.quality:.2f}")
+            else:
+                layers.append((lines, dict(color="magenta", linewidth=1.5, label=method)))
+                title = f"{record.name} {method} ({record.note})"
+            write_quicklook(looks / f"{record.name.replace('/', '_')}_{method}.png", layers,
+                            background=record.image, title=title)
+        per_image[record.name] = entry
+    scored = [e for e in per_image.values() if e["scored"]]
+    result = {"images_scored": len(scored)}
+    for method in methods:
+        for key in (*_SCORES, "s"):
+            result[f"{method}_mean_{key}"] = float(np.nanmean([e[f"{method}_{key}"]
+                                                              for e in scored]))
+    if "pipeline" in methods:
+        result["quality_ratio_to_baseline"] = (result["pipeline_mean_quality"]
+                                               / result["baseline_mean_quality"])
+    else:
+        result["pipeline"] = "skipped: gisroads.imagery.pipeline does not exist yet"
+    table = _imagery_table(per_image, list(methods))
+    (out / "imagery_real.md").write_text(table)
+    return {**result, "per_image": per_image, "table": table}
+
+
+def case_imagery_tile(out: Path, size_px: int, pixel_m: float) -> dict:
+    """The imagery pipeline on one synthetic RGB tile of ``size_px`` squared, on one core,
+    with its per-stage times, beside the naive baseline."""
+    import os
+
+    import shapely
+
+    from gisroads.evaluate import buffer_metrics, match_layers
+    from gisroads.geo import GeoRaster
+    from gisroads.io.quicklook import evaluation_layers, write_quicklook
+    from gisroads.synthetic import make_scene, render_image
+
+    pipeline = _image_pipeline()
+    if pipeline is None:
+        return {"skipped": "gisroads.imagery.pipeline does not exist yet"}
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    scene = make_scene(seed=0, size_m=(size_px * pixel_m, size_px * pixel_m))
+    rendered, _ = render_image(scene, pixel_m=pixel_m)
+    image = GeoRaster(rendered.data[:3, :size_px, :size_px], rendered.transform, rendered.crs)
+    (network, qa), seconds = _timed(pipeline, image)
+    (baseline, _), baseline_s = _timed(_image_baseline, image)
+    frame = shapely.box(*image.bounds)
+    result = {"tile_px": size_px, "pixel_m": pixel_m, "cores": 1, "pipeline_s": seconds,
+              **{f"stage_{k}_s": v for k, v in qa.get("timings_s", {}).items()},
+              "baseline_s": baseline_s}
+    for name, roads in (("pipeline", network), ("baseline", baseline)):
+        scores = buffer_metrics(roads.centrelines, scene.truth.centrelines, buffer_m=3.0,
+                                valid_area=frame)
+        result.update({f"{name}_{k}": getattr(scores, k) for k in _SCORES})
+    write_quicklook(out / "imagery_tile.png", evaluation_layers(match_layers(
+        network.centrelines, scene.truth.centrelines, buffer_m=3.0, valid_area=frame)),
+        background=image, title=f"imagery pipeline, {size_px} px synthetic tile: "
+                                f"{seconds:.1f} s on one core")
+    return result
+
+
 def case_snakes_registration(out: Path, size_m: float, density: float) -> dict:
     """Map registration and subclouds per km of road, streamed from a LAZ file."""
     import shapely
@@ -269,7 +420,8 @@ def case_snakes_registration(out: Path, size_m: float, density: float) -> dict:
 CASES = {"synth_cloud": case_synth_cloud, "evaluate": case_evaluate,
          "ground_planes": case_ground_planes, "lidar_tile": case_lidar_tile,
          "snakes_registration": case_snakes_registration,
-         "lidar_real": case_lidar_real}
+         "lidar_real": case_lidar_real, "imagery_real": case_imagery_real,
+         "imagery_tile": case_imagery_tile}
 
 
 def run_case(name: str, out: Path, params: dict) -> dict:
@@ -304,7 +456,11 @@ def main() -> None:
             "snakes_registration": {"size_m": 300.0 if args.quick else 500.0,
                                     "density": 10.0},
             "lidar_real": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"
-                                           / "data" / "lidar")}}
+                                           / "data" / "lidar")},
+            "imagery_real": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"
+                                             / "data" / "imagery"),
+                             "datasets": ["spacenet_vegas", "eth"] if args.quick else None},
+            "imagery_tile": {"size_px": 1000, "pixel_m": 0.3}}
     results = {}
     for name, params in plan.items():
         print(f"running {name} {params} ...", flush=True)
@@ -315,7 +471,8 @@ def main() -> None:
     lines += [f"| {case} | {key} | {value:.4g} |" if isinstance(value, float)
               else f"| {case} | {key} | {value} |"
               for case, figures in results.items() for key, value in figures.items()
-              if key != "params"]
+              if key not in ("params", "per_image", "table")]
+    lines += ["\n" + figures["table"] for figures in results.values() if "table" in figures]
     (args.out / "results.md").write_text("\n".join(lines) + "\n")
     print(f"results in {args.out}/results.json and results.md; quick-looks *.png")
 

@@ -1,0 +1,1 @@
+"""Road networks from aerial imagery (Grote & Rottensteiner): segments, road parts, subgraphs."""
