@@ -59,8 +59,7 @@ from shapely.ops import substring
 from ..geo import RoadNetwork, network_from_centrelines
 from ..progress import Progress, report
 # the shared noding and tangent steps of the LiDAR and snake vectorisers (private there)
-from ..vectorize.ribbons import _node as node_roads
-from ..vectorize.ribbons import _tangents
+from ..vectorize.ribbons import node_roads, tangents
 
 METHOD = "grote-rottensteiner"
 #: Polygon approximation tolerance: a tenth to a fifth of a suburban road's width.
@@ -209,8 +208,8 @@ def _alongside_share(lines, a, b, near_m, cos_tol) -> np.ndarray:
     probes = shapely.line_interpolate_point(lines[a][pair], along)
     other = lines[b][pair]
     close = shapely.distance(probes, other) <= near_m[pair]
-    own = _tangents(lines[a][pair], along)
-    theirs = _tangents(other, shapely.line_locate_point(other, probes))
+    own = tangents(lines[a][pair], along)
+    theirs = tangents(other, shapely.line_locate_point(other, probes))
     aligned = np.abs(np.einsum("ij,ij->i", own, theirs)) >= cos_tol
     return np.bincount(pair, weights=close & aligned, minlength=len(a)) / count
 
@@ -484,7 +483,7 @@ class _JunctionSearch:
     def _crosses(self, d, line, hit) -> bool:
         """The end's direction and the line's at ``hit`` differ by more than collinear."""
         along = shapely.line_locate_point(line, shapely.points(hit))
-        tangent = _tangents(np.array([line]), np.array([along]))[0]
+        tangent = tangents(np.array([line]), np.array([along]))[0]
         return abs(float(d @ tangent)) < self.cos_collinear
 
     def _end_road(self, end, target, hit, is_connection):

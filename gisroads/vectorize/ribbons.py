@@ -152,7 +152,7 @@ def ribbon_areas(lines, widths_m) -> np.ndarray:
 
 # --- geometry helpers ---------------------------------------------------------------------
 
-def _tangents(lines, along_m) -> np.ndarray:
+def tangents(lines, along_m) -> np.ndarray:
     """Unit direction of lines at distances ``along_m`` along them, shape (n, 2)."""
     length = shapely.length(lines)
     back = shapely.line_interpolate_point(lines, np.clip(along_m - _TANGENT_STEP_M, 0, length))
@@ -227,8 +227,8 @@ def _stitch(a, b, tolerance_m: float):
     if shapely.length(b) > shapely.length(a):
         a, b = b, a
     closest = shapely.get_coordinates(shapely.shortest_line(a, b))
-    ta = _tangents(np.array([a]), shapely.line_locate_point(a, shapely.points(closest[0])))
-    tb = _tangents(np.array([b]), shapely.line_locate_point(b, shapely.points(closest[1])))
+    ta = tangents(np.array([a]), shapely.line_locate_point(a, shapely.points(closest[0])))
+    tb = tangents(np.array([b]), shapely.line_locate_point(b, shapely.points(closest[1])))
     if float(np.sum(ta * tb)) < 0:
         b = shapely.reverse(b)
     la, lb = float(shapely.length(a)), float(shapely.length(b))
@@ -281,8 +281,8 @@ def _continuation_pairs(lines, widths_m, join_gap_m: float, angle_tol_deg: float
     contact = ((i_start | i_end) & (j_start | j_end)) | alongside
     i, j, tolerance = i[contact], j[contact], tolerance[contact]
     closest = shapely.get_coordinates(shapely.shortest_line(lines[i], lines[j])).reshape(-1, 2, 2)
-    ti = _tangents(lines[i], shapely.line_locate_point(lines[i], shapely.points(closest[:, 0])))
-    tj = _tangents(lines[j], shapely.line_locate_point(lines[j], shapely.points(closest[:, 1])))
+    ti = tangents(lines[i], shapely.line_locate_point(lines[i], shapely.points(closest[:, 0])))
+    tj = tangents(lines[j], shapely.line_locate_point(lines[j], shapely.points(closest[:, 1])))
     aligned = np.abs(np.einsum("ij,ij->i", ti, tj)) >= np.cos(np.radians(angle_tol_deg))
     i, j, tolerance = i[aligned], j[aligned], tolerance[aligned]
     order = np.argsort(shapely.distance(lines[i], lines[j]), kind="stable")
@@ -351,8 +351,8 @@ def _snap_ends(lines, widths_m, *, join_gap_m: float, angle_tol_deg: float) -> n
     distance = shapely.distance(ends[e], lines[t])
     along_target = shapely.line_locate_point(lines[t], ends[e])
     along_source = np.where(at_start[e], 0.0, shapely.length(lines[end_line[e]]))
-    crossing = (np.abs(np.einsum("ij,ij->i", _tangents(lines[end_line[e]], along_source),
-                                 _tangents(lines[t], along_target)))
+    crossing = (np.abs(np.einsum("ij,ij->i", tangents(lines[end_line[e]], along_source),
+                                 tangents(lines[t], along_target)))
                 < np.cos(np.radians(angle_tol_deg)))
     ok = crossing & (distance <= widths_m[t] / 2 + join_gap_m)
     e, t, distance = e[ok], t[ok], distance[ok]
@@ -380,8 +380,24 @@ def _snap_ends(lines, widths_m, *, join_gap_m: float, angle_tol_deg: float) -> n
 
 # --- 3. node ------------------------------------------------------------------------------
 
-def _node(lines, widths_m, scores, *, join_gap_m: float, min_length_m: float):
-    """Noded roads (step 3 of the module docstring): (lines, width_m, score)."""
+def node_roads(lines, widths_m, scores, *, join_gap_m: float, min_length_m: float):
+    """Noded roads (step 3 of the module docstring): roads split at crossings and T ends,
+    overshooting spurs trimmed, roads merged through degree-2 nodes.
+
+    Parameters
+    ----------
+    lines : ndarray of shapely LineString
+    widths_m, scores : ndarray of float
+        Per line; carried to the roads as length-weighted means.
+    join_gap_m : float
+        How far past the half width of a road a spur may overshoot and still be trimmed.
+    min_length_m : float
+        Shorter isolated roads are dropped.
+
+    Returns
+    -------
+    (lines, width_m, score)
+    """
     tree = shapely.STRtree(lines)
     graph = line_graph(lines)
     edges, pieces = graph.edges, graph.lines
@@ -476,7 +492,7 @@ def _pieces_to_network(lines, widths_m, scores, areas, crs, *, method: str, join
         return _empty_network(crs, method, qa)
     snapped = _snap_ends(chains[kept], chain_width[kept], join_gap_m=join_gap_m,
                          angle_tol_deg=angle_tol_deg)
-    roads, width, score = _node(snapped, chain_width[kept], chain_score[kept],
+    roads, width, score = node_roads(snapped, chain_width[kept], chain_score[kept],
                                 join_gap_m=join_gap_m, min_length_m=min_length_m)
     if len(roads) == 0:
         return _empty_network(crs, method, qa)
