@@ -635,7 +635,8 @@ def road_strings(road_parts: gpd.GeoDataFrame, gaps: gpd.GeoDataFrame) -> gpd.Ge
     road_parts : GeoDataFrame
         As for :func:`gap_edges`.
     gaps : GeoDataFrame
-        With ``from_part``, ``from_end``, ``to_part``, ``to_end``, ``selected``.
+        With ``from_part``, ``from_end``, ``to_part``, ``to_end``, ``selected`` (missing
+        counts as False), e.g. from :func:`select_gap_edges` or edited by hand.
 
     Returns
     -------
@@ -654,7 +655,7 @@ def road_strings(road_parts: gpd.GeoDataFrame, gaps: gpd.GeoDataFrame) -> gpd.Ge
         return _empty(_STRING_COLUMNS, road_parts.crs)
     ids = road_parts["part_id"].to_numpy()
     row = {pid: r for r, pid in enumerate(ids.tolist())}
-    chosen = gaps[gaps["selected"].astype(bool)] if len(gaps) else gaps
+    chosen = gaps[gaps["selected"].fillna(False).astype(bool)] if len(gaps) else gaps
     link: dict = {}
     for ends in zip(*_end_keys(chosen)):
         for part, end in ends:

@@ -8,7 +8,7 @@ from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutpu
 from gisroads.imagery.cues import image_cues, normalised_dsm
 from gisroads.imagery.subgraph import (MAX_DIRECTION_DIFF_RAD, MAX_GAP_M, MAX_GAP_RELATIVE,
                                        MAX_LATERAL_OFFSET_M, MAX_OVERLAP_M, SMALL_GAP_M,
-                                       context_rasters, link_road_parts)
+                                       context_rasters, link_road_parts, road_strings)
 from gisroads.io.raster import read_raster
 
 from ..convert import (frame_to_sink, gisroads_errors, progress_callback, source_to_frame,
@@ -35,9 +35,11 @@ class SubgraphLinking(GisroadsAlgorithm):
         "small-gap length ignore their context. An integer program (PuLP) then keeps the "
         "links of greatest total weight with at most one link per part end.</p>"
         "<p>Outputs: <i>gap_edges</i>, every hypothesis with its features, context, weights "
-        "and <i>selected</i> (edit it and re-run the next stage to override), and "
-        "<i>road_strings</i>, the chained parts with length-weighted width and quality, "
-        "the input of junction construction.</p>")
+        "and <i>selected</i>, and <i>road_strings</i>, the chained parts with "
+        "length-weighted width and quality, the input of junction construction.</p>"
+        "<p>To override the program, edit <i>selected</i> in a gap_edges layer (at most "
+        "one selected edge per part end) and run again with it as <i>Edited gap edges</i>: "
+        "the road strings are then chained from it as it is.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         double = QgsProcessingParameterNumber.Double
@@ -46,6 +48,11 @@ class SubgraphLinking(GisroadsAlgorithm):
                                                  [QgsProcessing.TypeVectorLine]),
              "centre lines with part_id, width_m, quality and band means (mean_b1, ...), "
              "in a projected CRS in metres"),
+            (QgsProcessingParameterFeatureSource("EDITED_GAP_EDGES",
+                                                 self.tr("Edited gap edges"),
+                                                 [QgsProcessing.TypeVectorLine], optional=True),
+             "optional: a gap_edges layer of an earlier run with selected edited by hand; "
+             "when given, the road strings follow it and nothing is recomputed"),
             (QgsProcessingParameterRasterLayer("IMAGE", self.tr("Image (context)"),
                                                optional=True),
              "optional: the image the parts come from, for shadow, asphalt and (RGB) "
@@ -115,32 +122,38 @@ class SubgraphLinking(GisroadsAlgorithm):
         cues = image_cues(image, nir_band=nir, dsm=dsm)
         return {"transform": image.transform, **context_rasters(cues)}
 
+    def _link(self, parts, parameters, context, feedback):
+        """Generation, context, weights and the integer program with the parameters."""
+        def number(name):
+            return self.parameterAsDouble(parameters, name, context)
+
+        return link_road_parts(
+            parts, **self._context(parameters, context, parts.crs),
+            progress=progress_callback(feedback),
+            gap_options={"max_gap_m": number("MAX_GAP"),
+                         "max_gap_relative": number("MAX_GAP_RELATIVE"),
+                         "max_direction_diff_rad": np.radians(number("MAX_DIRECTION")),
+                         "max_lateral_offset_m": number("MAX_LATERAL"),
+                         "max_overlap_m": number("MAX_OVERLAP")},
+            weight_options={"small_gap_m": number("SMALL_GAP")})
+
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        source = self.parameterAsSource(parameters, "ROAD_PARTS", context)
-        parts = source_to_frame(source, feedback)
+        parts = source_to_frame(self.parameterAsSource(parameters, "ROAD_PARTS", context),
+                                feedback)
+        edited = self.parameterAsSource(parameters, "EDITED_GAP_EDGES", context)
         with gisroads_errors():
-            rasters = self._context(parameters, context, parts.crs)
-            gaps, strings = link_road_parts(
-                parts, **rasters, progress=progress_callback(feedback),
-                gap_options={
-                    "max_gap_m": self.parameterAsDouble(parameters, "MAX_GAP", context),
-                    "max_gap_relative": self.parameterAsDouble(parameters, "MAX_GAP_RELATIVE",
-                                                               context),
-                    "max_direction_diff_rad": np.radians(
-                        self.parameterAsDouble(parameters, "MAX_DIRECTION", context)),
-                    "max_lateral_offset_m": self.parameterAsDouble(parameters, "MAX_LATERAL",
-                                                                   context),
-                    "max_overlap_m": self.parameterAsDouble(parameters, "MAX_OVERLAP",
-                                                            context)},
-                weight_options={"small_gap_m": self.parameterAsDouble(parameters, "SMALL_GAP",
-                                                                      context)})
+            if edited is not None:
+                gaps = source_to_frame(edited, feedback)
+                strings = road_strings(parts, gaps)
+            else:
+                gaps, strings = self._link(parts, parameters, context, feedback)
         outputs = {}
         for param, layer, frame in (("GAP_EDGES", "gap_edges", gaps),
                                     ("ROAD_STRINGS", "road_strings", strings)):
             outputs[param] = frame_to_sink(self, parameters, param, context, frame,
                                            "LineString", feedback)
             style_on_load(context, outputs[param], layer)
-        selected = int(gaps["selected"].sum())
+        selected = int(gaps["selected"].fillna(False).astype(bool).sum())
         feedback.pushInfo(f"{len(gaps)} gap edges, {selected} kept; {len(strings)} road "
                           "strings")
         return {**outputs, "SELECTED": selected, "STRINGS": len(strings)}

@@ -5,7 +5,8 @@ import pytest
 import shapely
 from affine import Affine
 from pyproj import CRS
-from qgis.core import QgsApplication, QgsProcessingContext, QgsProcessingFeedback
+from qgis.core import (QgsApplication, QgsProcessingContext, QgsProcessingException,
+                       QgsProcessingFeedback)
 
 from gisroads.geo import GeoRaster
 from gisroads.io.raster import write_geotiff
@@ -99,6 +100,36 @@ def registry(qgis_app):
     QgsApplication.processingRegistry().removeProvider(provider)
 
 
+def run_in_process(registry, **params):
+    algorithm = registry.createAlgorithmById("gisroads:subgraphlinking")
+    params = {k: str(v) for k, v in params.items()}
+    context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
+    assert algorithm.prepare(params, context, feedback)
+    return algorithm.runPrepared(params, context, feedback)
+
+
+def test_edited_gap_edges_override_the_program(registry, tmp_path):
+    parts = write_parts(tmp_path / "parts.gpkg", [
+        (1, [(0, 0), (50, 0)], 6.0, 0.9), (2, [(60, 0), (110, 0)], 6.0, 0.8),
+        (3, [(58, 3), (58 + 50 * COS20, 3 + 50 * SIN20)], 4.0, 0.7)])
+    run_in_process(registry, ROAD_PARTS=parts, GAP_EDGES=tmp_path / "gaps.gpkg",
+                   ROAD_STRINGS=tmp_path / "strings.gpkg")
+    edited = gpd.read_file(tmp_path / "gaps.gpkg")
+    assert edited.selected.tolist() == [True, False]
+    edited["selected"] = [False, True]           # the user prefers the branch
+    write_geopackage(tmp_path / "edited.gpkg", {"gap_edges": edited})
+    result = run_in_process(registry, ROAD_PARTS=parts, EDITED_GAP_EDGES=tmp_path / "edited.gpkg",
+                            GAP_EDGES=tmp_path / "gaps2.gpkg",
+                            ROAD_STRINGS=tmp_path / "strings2.gpkg")
+    assert (result["SELECTED"], result["STRINGS"]) == (1, 2)
+    assert gpd.read_file(tmp_path / "strings2.gpkg").part_ids.tolist() == ["1,3", "2"]
+    edited["selected"] = True                     # both at part 1's end: refused
+    write_geopackage(tmp_path / "edited.gpkg", {"gap_edges": edited})
+    with pytest.raises(QgsProcessingException, match="part 1 end 1 has more than one"):
+        run_in_process(registry, ROAD_PARTS=parts, EDITED_GAP_EDGES=tmp_path / "edited.gpkg",
+                       GAP_EDGES=tmp_path / "gaps3.gpkg", ROAD_STRINGS=tmp_path / "s3.gpkg")
+
+
 def test_a_dsm_alone_gives_the_context_in_process(registry, tmp_path):
     parts = write_parts(tmp_path / "parts.gpkg", [(1, [(0, 0), (40, 0)], 6.0, 0.9),
                                                   (2, [(60, 0), (100, 0)], 6.0, 0.9)])
@@ -106,13 +137,9 @@ def test_a_dsm_alone_gives_the_context_in_process(registry, tmp_path):
     heights[15:25, 55:65] = 8.0                        # a building in the gap
     write_geotiff(tmp_path / "dsm.tif",
                   GeoRaster(heights, Affine(1, 0, -10, 0, -1, 20), CRS(EPSG)))
-    algorithm = registry.createAlgorithmById("gisroads:subgraphlinking")
-    params = {"ROAD_PARTS": parts, "DSM": str(tmp_path / "dsm.tif"),
-              "GAP_EDGES": str(tmp_path / "gaps.gpkg"),
-              "ROAD_STRINGS": str(tmp_path / "strings.gpkg")}
-    context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
-    assert algorithm.prepare(params, context, feedback)
-    result = algorithm.runPrepared(params, context, feedback)
+    result = run_in_process(registry, ROAD_PARTS=parts, DSM=tmp_path / "dsm.tif",
+                            GAP_EDGES=tmp_path / "gaps.gpkg",
+                            ROAD_STRINGS=tmp_path / "strings.gpkg")
     assert (result["SELECTED"], result["STRINGS"]) == (0, 2)
     gaps = gpd.read_file(tmp_path / "gaps.gpkg")
     assert gaps.n_building.tolist() == [1] and gaps.context_cues.tolist() == ["ndsm"]
