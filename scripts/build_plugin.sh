@@ -13,7 +13,8 @@ cp metadata.txt "$plugin/"
 cp -r gisroads styles "$plugin/"
 find "$plugin" -name "__pycache__" -prune -exec rm -rf {} +
 mkdir -p dist
-rm -f dist/gisroads_qgis.zip.tmp
-(cd "$build" && python3 -m zipfile -c "$OLDPWD/dist/gisroads_qgis.zip.tmp" gisroads_qgis)
-mv dist/gisroads_qgis.zip.tmp dist/gisroads_qgis.zip
+# a private temporary name: two builds running at once each rename a whole zip into place
+(cd "$build" && python3 -m zipfile -c "$build/gisroads_qgis.zip" gisroads_qgis)
+mv "$build/gisroads_qgis.zip" dist/gisroads_qgis.zip.$$
+mv dist/gisroads_qgis.zip.$$ dist/gisroads_qgis.zip
 echo "built dist/gisroads_qgis.zip"
