@@ -13,11 +13,12 @@ subclouds are held.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..io.las import DEFAULT_CHUNK
+from ..io.las import DEFAULT_CHUNK, PointCloud, las_info
 from ..progress import Progress, report
 from .buckets import GridBuckets, iter_source, read_corridor
 from .registration import RegisteredMap
@@ -146,6 +147,8 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
             raise ValueError(f"{name} must be positive, got {value}")
     xyz, tangent, road_of = registered.xyz, registered.tangent, registered.road_id
     n = len(xyz)
+    total = max(len(source) if isinstance(source, PointCloud)
+                else las_info(source)["point_count"] if isinstance(source, (str, Path)) else 1, 1)
     grade = _grades(registered)
     prior = np.column_stack([np.zeros(n), grade * tangent[:, 0], grade * tangent[:, 1]])
     index = GridBuckets(xyz[:, :2], road_of, reach_m)
@@ -155,7 +158,8 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
     report(progress, 0.0, "fitting the support planes")
     moments = np.zeros((n, 9))
     for offset, chunk in iter_source(source, chunk_size=chunk_size):
-        report(progress, 0.0, f"support planes: {offset + len(chunk)} points read")
+        report(progress, 0.5 * (offset + len(chunk)) / total,
+               f"support planes: {offset + len(chunk)} of {total} points read")
         candidate = chunk.xyz[plane_index.in_corridor(chunk.xyz[:, :2])]
         if len(candidate) == 0:
             continue
@@ -180,7 +184,8 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
     trees = {r: cKDTree(xyz[span, :2]) for r, span in spans.items()}
     found: dict[int, list] = {int(r): [] for r in roads}
     for offset, chunk in iter_source(source, chunk_size=chunk_size):
-        report(progress, 0.5, f"subclouds: {offset + len(chunk)} points read")
+        report(progress, 0.5 + 0.5 * (offset + len(chunk)) / total,
+               f"subclouds: {offset + len(chunk)} of {total} points read")
         keys = index.keys(chunk.xyz[:, :2])
         order = np.argsort(keys, kind="stable")
         sorted_keys = keys[order]

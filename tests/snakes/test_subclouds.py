@@ -58,7 +58,7 @@ def test_bad_parameters_are_refused():
     cloud, _ = overpass_cloud()
     lines = gpd.GeoDataFrame(geometry=[shapely.linestrings([(-30, 0), (30, 0)])],
                              crs="EPSG:32633")
-    reg = register_map(lines, cloud)
+    reg = register_map(lines, cloud, support_radius_m=0.4)
     with pytest.raises(ValueError, match="reach_m"):
         road_patches(reg, cloud, reach_m=0)
     with pytest.raises(ValueError, match="chunk_size"):
@@ -120,3 +120,21 @@ def test_chunked_file_read_equals_in_memory(bridge_scene):
         assert np.array_equal(a.points, b.points)
         assert np.allclose(a.plane_normal, b.plane_normal, atol=1e-9)
     assert sum(len(p.points) for p in in_memory) > 100_000
+
+
+def test_progress_reaches_the_end_and_can_cancel():
+    from gisroads.progress import Cancelled
+
+    cloud, _ = overpass_cloud()
+    lines = gpd.GeoDataFrame(geometry=[shapely.linestrings([(-30, 0), (30, 0)])],
+                             crs="EPSG:32633")
+    reg = register_map(lines, cloud, support_radius_m=0.4)
+    seen = []
+    road_patches(reg, cloud, chunk_size=5000, progress=lambda f, m: seen.append(f))
+    assert seen == sorted(seen) and seen[-1] == 1.0 and len(seen) > 4
+
+    def cancel(fraction, message):
+        if fraction > 0.3:
+            raise Cancelled()
+    with pytest.raises(Cancelled):
+        road_patches(reg, cloud, chunk_size=5000, progress=cancel)
