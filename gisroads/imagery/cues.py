@@ -156,6 +156,34 @@ def ndvi(image: GeoRaster, nir_band: int, red_band: int | None = None) -> np.nda
     return index
 
 
+def excess_green(image: GeoRaster, bands=(1, 2, 3)) -> np.ndarray:
+    """Excess green ``(2G - R - B) / (R + G + B)`` in [-1, 2]: the vegetation cue of an RGB
+    image without NIR (Woebbecke et al. 1995). Asphalt, concrete and roofs are near 0,
+    lawns and trees 0.1 and more.
+
+    Computed on the raw values (a ratio: a common scale cancels).
+
+    Parameters
+    ----------
+    image : GeoRaster
+    bands : (red, green, blue)
+        1-based band numbers.
+
+    Returns
+    -------
+    ndarray of float32, shape ``(rows, cols)``; NaN where the image has no data or is black.
+    """
+    data = _bands(image)
+    red, green, blue = (data[_check_band(b, len(data), name) - 1].astype(np.float32)
+                        for b, name in zip(bands, ("red", "green", "blue")))
+    total = red + green + blue
+    with np.errstate(invalid="ignore", divide="ignore"):
+        index = np.where(total > 0, (2 * green - red - blue) / total, np.nan)
+    index = index.astype(np.float32)
+    index[~valid_mask(image)] = np.nan
+    return index
+
+
 def resample_to(raster: GeoRaster, like: GeoRaster, *, order: int = 1) -> np.ndarray:
     """A single-band raster sampled at the pixel centres of another raster's grid.
 
@@ -286,6 +314,9 @@ class ImageCues:
     kind : str
         ``"pan"`` (one band), ``"cir"`` (three bands, one of them NIR) or ``"rgb"``.
     nir_band : int or None
+    exg : ndarray or None
+        :func:`excess_green` of bands 1-3, for ``"rgb"`` images (the vegetation cue when
+        there is no NIR band).
     """
 
     bands: np.ndarray
@@ -294,6 +325,7 @@ class ImageCues:
     ndsm: np.ndarray | None
     kind: str
     nir_band: int | None = None
+    exg: np.ndarray | None = None
 
     @property
     def used(self) -> tuple[str, ...]:
@@ -335,8 +367,10 @@ def image_cues(image: GeoRaster, *, nir_band: int | None = None,
         See :func:`scale_bands`.
     """
     bands = scale_bands(image, percentiles=percentiles)
+    kind = image_kind(len(bands), nir_band)
     return ImageCues(
         bands=bands, intensity=_visible_mean(bands, nir_band),
         ndvi=None if nir_band is None else ndvi(image, nir_band, red_band),
         ndsm=None if dsm is None else normalised_dsm(dsm, image, window_m=ground_window_m),
-        kind=image_kind(len(bands), nir_band), nir_band=nir_band)
+        kind=kind, nir_band=nir_band,
+        exg=excess_green(image) if kind == "rgb" and nir_band not in (1, 2, 3) else None)

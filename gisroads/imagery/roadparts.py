@@ -8,8 +8,9 @@ Table 1, and the criteria of Grote & Heipke (2008). A segment is a road part whe
 * of a road's width (twice the mean distance from its centre line to its border) and of
   nearly constant width (mean / standard deviation of that width high);
 * long enough, low in a normalised DSM (when given), not vegetation (low NDVI, when a NIR
-  band is given), neither very dark (shadow) nor very bright, and of homogeneous
-  intensity (low standard deviation).
+  band is given; an RGB image without NIR uses its excess green instead, an addition to
+  the paper, whose images were all CIR), neither very dark (shadow) nor very bright, and
+  of homogeneous intensity (low standard deviation).
 
 Adjacent road parts with similar directions are merged when the merged region still
 passes. Each part gets a quality measure in [0, 1] from its elongation, width, width
@@ -66,7 +67,7 @@ _NEIGHBOURS = ((0, 1, 1.0), (1, -1, np.sqrt(2)), (1, 0, 1.0), (1, 1, np.sqrt(2))
 
 SEGMENT_COLUMNS = ["segment_id", "area_m2", "perimeter_m", "elongation", "convexity",
                    "width_m", "width_constancy", "length_m", "direction_rad",
-                   "mean_intensity", "std_intensity", "ndvi", "height_m"]
+                   "mean_intensity", "std_intensity", "ndvi", "excess_green", "height_m"]
 """Attributes of :func:`measure_segments` (then ``mean_b1``, ``mean_b2`` ...)."""
 
 CRITERIA = {
@@ -79,6 +80,7 @@ CRITERIA = {
     "width_constancy_min": 1.7,
     "height_max_m": 2.0,
     "ndvi_max": 0.2,
+    "excess_green_max": 0.05,
     "intensity_range": (0.1, 0.9),
     "intensity_std_max": 0.2,
     "road_width_m": 7.0,
@@ -348,7 +350,8 @@ def _measure(labels: np.ndarray, cues: ImageCues, transform: Affine, crs,
                                     np.pi)
     frame["mean_intensity"], frame["std_intensity"] = _group_stats(
         index, cues.intensity[valid].astype(float), n)
-    for name, cue in (("ndvi", cues.ndvi), ("height_m", cues.ndsm)):
+    for name, cue in (("ndvi", cues.ndvi), ("excess_green", cues.exg),
+                      ("height_m", cues.ndsm)):
         frame[name] = np.full(n, np.nan) if cue is None else \
             _group_stats(index, cue[valid].astype(float), n, std=False)
     for band, values in enumerate(cues.bands, start=1):
@@ -407,16 +410,17 @@ def measure_segments(labels, image: GeoRaster, *, ndvi=None, ndsm=None,
         ``width_m`` (twice the mean distance from the trimmed centre line to the border),
         ``width_constancy`` (mean / std of that width), ``length_m`` (centre line),
         ``direction_rad`` (main axis, [0, pi) counter-clockwise from east),
-        ``mean_intensity``, ``std_intensity`` ([0, 1]), ``ndvi`` (mean), ``height_m`` (mean
-        nDSM), ``mean_b1`` ... (each band scaled to [0, 1]) and ``centreline`` (a
-        second GeoSeries, not the active geometry: the LineString the road-part layer
-        takes; None for segments at most two pixels wide, whose width and length are NaN).
+        ``mean_intensity``, ``std_intensity`` ([0, 1]), ``ndvi`` (mean), ``excess_green``
+        (mean, RGB images), ``height_m`` (mean nDSM), ``mean_b1`` ... (each band scaled to
+        [0, 1]) and ``centreline`` (a second GeoSeries, not the active geometry: the
+        LineString the road-part layer takes; None for segments at most two pixels wide,
+        whose width and length are NaN).
     """
     pixel_m = _metric_pixel(image)
     labels = _check_labels(labels, image.shape)
     if cues is None:
         base = image_cues(image, nir_band=nir_band)
-        cues = ImageCues(base.bands, base.intensity, ndvi, ndsm, base.kind, nir_band)
+        cues = ImageCues(base.bands, base.intensity, ndvi, ndsm, base.kind, nir_band, base.exg)
     for name, cue in (("ndvi", cues.ndvi), ("ndsm", cues.ndsm)):
         if cue is not None and np.shape(cue) != labels.shape:
             raise ValueError(f"{name} {np.shape(cue)} is not on the image grid "
@@ -466,6 +470,7 @@ def filter_road_parts(segments: gpd.GeoDataFrame, *,
                       width_constancy_min: float = CRITERIA["width_constancy_min"],
                       height_max_m: float = CRITERIA["height_max_m"],
                       ndvi_max: float = CRITERIA["ndvi_max"],
+                      excess_green_max: float = CRITERIA["excess_green_max"],
                       intensity_range=CRITERIA["intensity_range"],
                       intensity_std_max: float = CRITERIA["intensity_std_max"],
                       road_width_m: float = CRITERIA["road_width_m"]):
@@ -504,7 +509,11 @@ def filter_road_parts(segments: gpd.GeoDataFrame, *,
     ndvi_max : float
         Largest mean NDVI. Table 1 has 0 for scanned CIR film; the paper adapted this
         threshold per data set. 0.2 separates asphalt (about 0) from grass (0.4).
-        Skipped without a NIR band.
+    excess_green_max : float
+        Largest mean excess green (:func:`gisroads.imagery.cues.excess_green`), the
+        vegetation test of RGB images without NIR, which the paper did not need (its images
+        were CIR): 0.05 keeps grey and brown surfaces, lawns and trees are above 0.1. Skipped
+        where the NDVI test applies and for panchromatic and CIR images.
     intensity_range : (min, max)
         Mean intensity bounds in [0, 1] (see :func:`gisroads.imagery.cues.intensity`):
         Table 1's minimum 40 of 255 is 0.1 after a typical 1-99 % stretch; above 0.9 are
@@ -527,7 +536,8 @@ def filter_road_parts(segments: gpd.GeoDataFrame, *,
         width_range_m=width_range_m, min_length_m=min_length_m, elongation_min=elongation_min,
         convexity_min=convexity_min, elongation_curved_min=elongation_curved_min,
         convexity_curved_min=convexity_curved_min, width_constancy_min=width_constancy_min,
-        height_max_m=height_max_m, ndvi_max=ndvi_max, intensity_range=intensity_range,
+        height_max_m=height_max_m, ndvi_max=ndvi_max, excess_green_max=excess_green_max,
+        intensity_range=intensity_range,
         intensity_std_max=intensity_std_max, road_width_m=road_width_m)))
     return out, _road_part_layer(out)
 
@@ -556,7 +566,9 @@ def _verdict(segments: pd.DataFrame, criteria: dict) -> dict:
         "irregular width": s["width_constancy"] < c["width_constancy_min"],
         "too short": np.isnan(s["length_m"]) | (s["length_m"] < c["min_length_m"]),
         "too high": s["height_m"] > c["height_max_m"],
-        "vegetation": s["ndvi"] > c["ndvi_max"],
+        # NDVI when there is NIR, else the excess green of RGB
+        "vegetation": np.where(np.isnan(s["ndvi"]), s["excess_green"] > c["excess_green_max"],
+                               s["ndvi"] > c["ndvi_max"]),
         "too dark": s["mean_intensity"] < low_i,
         "too bright": s["mean_intensity"] > high_i,
         "textured": s["std_intensity"] > c["intensity_std_max"],
@@ -654,10 +666,10 @@ def _window(mask: np.ndarray):
 
 def _crop(cues: ImageCues, window) -> ImageCues:
     rows, cols = window
-    return ImageCues(cues.bands[:, rows, cols], cues.intensity[rows, cols],
-                     None if cues.ndvi is None else cues.ndvi[rows, cols],
-                     None if cues.ndsm is None else cues.ndsm[rows, cols],
-                     cues.kind, cues.nir_band)
+    def crop(cue):
+        return None if cue is None else cue[..., rows, cols]
+    return ImageCues(crop(cues.bands), crop(cues.intensity), crop(cues.ndvi), crop(cues.ndsm),
+                     cues.kind, cues.nir_band, crop(cues.exg))
 
 
 def merge_adjacent_parts(segments: gpd.GeoDataFrame, labels, image: GeoRaster,

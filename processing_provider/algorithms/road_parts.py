@@ -44,6 +44,10 @@ THRESHOLDS = {
                    "mean of the normalised DSM over the segment; used only with a DSM"),
     "MAX_NDVI": ("Largest NDVI", ("ndvi_max", None),
                  "mean NDVI; used only with a NIR band (paper: adapted per data set)"),
+    "MAX_EXCESS_GREEN": ("Largest excess green (RGB without NIR)",
+                         ("excess_green_max", None),
+                         "mean (2G - R - B) / (R + G + B): the vegetation test of RGB images "
+                         "without a NIR band; lawns and trees are above 0.1"),
     "MIN_INTENSITY": ("Smallest intensity (0-1)", ("intensity_range", 0),
                       "darker segments are shadows; intensity is the mean of the bands "
                       "stretched between their 1st and 99th percentiles"),
@@ -74,9 +78,10 @@ class RoadPartFiltering(GisroadsAlgorithm):
         "convex-hull area), where very elongated curved parts may be less convex; mean width "
         "within a road-width range and nearly constant along the centre line; a minimum "
         "length. <b>Radiometry</b>: intensity neither very low (shadow) nor very high, low "
-        "intensity standard deviation, low NDVI when a NIR band is given, low height above "
-        "ground when a DSM is given. Adjacent road parts with similar directions are merged "
-        "when the merged region still passes. Each part gets a quality in 0-1 from its "
+        "intensity standard deviation, low NDVI when a NIR band is given (else, for RGB, a "
+        "low excess green), low height above ground when a DSM is given. Adjacent road "
+        "parts with similar directions are merged when the merged region still passes. "
+        "Each part gets a quality in 0-1 from its "
         "elongation, width, width constancy, length and NDVI.</p>"
         "<p>Outputs: <i>segments</i>, every segment with its measurements, <i>passed</i>, "
         "<i>reason</i> (the first failing test) and <i>failures</i> (all of them), so the "
@@ -110,7 +115,7 @@ class RoadPartFiltering(GisroadsAlgorithm):
         for name, (label, (key, index), text) in THRESHOLDS.items():
             params.append((QgsProcessingParameterNumber(
                 name, self.tr(label), double, _default(key, index),
-                minValue=-1.0 if name == "MAX_NDVI" else 0.0), text))
+                minValue=-1.0 if name in ("MAX_NDVI", "MAX_EXCESS_GREEN") else 0.0), text))
         params += [
             (QgsProcessingParameterBoolean("MERGE", self.tr("Merge adjacent road parts"),
                                            True),

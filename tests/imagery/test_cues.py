@@ -3,7 +3,7 @@ import pytest
 from affine import Affine
 
 from gisroads.geo import GeoRaster
-from gisroads.imagery.cues import (ground_surface, image_cues, intensity, ndvi,
+from gisroads.imagery.cues import (excess_green, ground_surface, image_cues, intensity, ndvi,
                                    normalised_dsm, resample_to, scale_bands)
 
 CRS = "EPSG:32633"
@@ -64,6 +64,17 @@ def test_ndvi_exact_values_and_band_defaults():
         ndvi(GeoRaster(rgbn, T, CRS), nir_band=1, red_band=1)
 
 
+def test_excess_green_exact_values_and_scale_invariance():
+    rgb = np.array([[[80, 86, 0]], [[112, 88, 0]], [[52, 91, 0]]], np.uint8)  # grass, asphalt
+    index = excess_green(GeoRaster(rgb, T, CRS))
+    np.testing.assert_allclose(index[0, :2], [92 / 244, -1 / 265], rtol=1e-6)
+    assert np.isnan(index[0, 2])  # black
+    sixteen = excess_green(GeoRaster(rgb.astype(np.uint16) * 257, T, CRS))
+    np.testing.assert_allclose(sixteen, index, rtol=1e-6)
+    with pytest.raises(ValueError, match="blue band 3 does not exist"):
+        excess_green(GeoRaster(rgb[:2], T, CRS))
+
+
 def test_ground_surface_removes_buildings_and_keeps_slopes_and_plateaus():
     rows, cols = np.mgrid[0:200, 0:200]
     terrain = 100.0 + 0.05 * cols * 0.5          # 5 % slope
@@ -109,7 +120,11 @@ def test_image_cues_record_which_cues_were_used():
     assert full.record() == {"cues": "rgb+nir+dsm", "image": "rgb", "bands": 4,
                              "nir_band": 4, "ndvi": True, "dsm": True}
     assert full.ndsm.shape == full.ndvi.shape == (20, 20)
-    assert image_cues(GeoRaster(rgbn[:3], T, CRS)).record()["cues"] == "rgb"
-    assert image_cues(GeoRaster(rgbn[:3], T, CRS), nir_band=1).record()["cues"] == "cir+nir"
+    assert full.exg.shape == (20, 20)  # the NIR band is band 4: bands 1-3 are RGB
+    rgb = image_cues(GeoRaster(rgbn[:3], T, CRS))
+    assert rgb.record()["cues"] == "rgb" and rgb.exg is not None and rgb.ndvi is None
+    cir = image_cues(GeoRaster(rgbn[:3], T, CRS), nir_band=1)
+    assert cir.record()["cues"] == "cir+nir" and cir.exg is None
     pan = image_cues(GeoRaster(rgbn[0], T, CRS))
     assert pan.record()["cues"] == "pan" and pan.ndvi is None and pan.ndsm is None
+    assert pan.exg is None

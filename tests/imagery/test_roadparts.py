@@ -97,25 +97,39 @@ def test_parking_lot_fails_and_names_the_test():
     assert _row(loose, 2).reason == "too wide"
 
 
-@pytest.mark.parametrize("colour, cue, reason", [(ROOF, "dsm", "too high"),
-                                                 (GRASS, "nir", "vegetation")])
-def test_roof_and_grass_strips_fail_only_with_their_cue(colour, cue, reason):
+def test_roof_strip_fails_only_with_a_dsm():
     _, strip = _strip(75, 75, 8.0, 100.0, 0.0)
-    labels, image = _paint([(strip, colour)], background=ASPHALT)
+    labels, image = _paint([(strip, ROOF)], background=ASPHALT)
     dsm = np.zeros(SHAPE, np.float32)
     dsm[labels == 1] = 6.0  # a long roof
-    dsm = GeoRaster(dsm, T, CRS)
-    with_cue = extract_road_parts(labels, image, **({"dsm": dsm} if cue == "dsm"
-                                                    else {"nir_band": 4}))
-    assert _row(with_cue.segments, 1).reason == reason
-    assert len(with_cue.road_parts) == 0
-    assert with_cue.cues["cues"] == ("rgb+dsm" if cue == "dsm" else "rgb+nir")
-    rgb = GeoRaster(image.data[:3], T, CRS)  # no NIR band, no DSM
-    without = extract_road_parts(labels, rgb)
-    assert _row(without.segments, 1).passed
-    assert without.cues["cues"] == "rgb"
+    with_dsm = extract_road_parts(labels, image, dsm=GeoRaster(dsm, T, CRS))
+    assert _row(with_dsm.segments, 1).reason == "too high"
+    assert _row(with_dsm.segments, 1).height_m == pytest.approx(6.0, abs=0.01)
+    assert len(with_dsm.road_parts) == 0 and with_dsm.cues["cues"] == "rgb+dsm"
+    without = extract_road_parts(labels, image)
+    assert _row(without.segments, 1).passed and without.cues["cues"] == "rgb"
     assert np.isnan(_row(without.segments, 1).height_m)
-    assert np.isnan(_row(without.segments, 1).ndvi)
+
+
+def test_grass_strip_fails_on_ndvi_or_excess_green_and_passes_without_colour():
+    _, strip = _strip(75, 75, 8.0, 100.0, 0.0)
+    labels, image = _paint([(strip, GRASS)], background=ASPHALT)
+    cir = extract_road_parts(labels, image, nir_band=4)      # NDVI 0.41
+    assert _row(cir.segments, 1).reason == "vegetation" and cir.cues["cues"] == "rgb+nir"
+    assert _row(cir.segments, 1).ndvi == pytest.approx(0.41, abs=0.02)
+    rgb = extract_road_parts(labels, GeoRaster(image.data[:3], T, CRS))  # excess green 0.38
+    assert _row(rgb.segments, 1).reason == "vegetation"
+    assert np.isnan(_row(rgb.segments, 1).ndvi)
+    assert _row(rgb.segments, 1).excess_green == pytest.approx(0.38, abs=0.02)
+    assert _row(rgb.segments, 0).excess_green == pytest.approx(0.0, abs=0.02)  # asphalt
+    # without NIR and colour (or the RGB test loosened) nothing tells grass from asphalt
+    grey = np.round(image.data[:3].mean(axis=0)).astype(np.uint8)  # 81 against 88
+    pan = extract_road_parts(labels, GeoRaster(grey, T, CRS))
+    assert _row(pan.segments, 1).passed and pan.cues["cues"] == "pan"
+    assert np.isnan(_row(pan.segments, 1).excess_green)
+    loose = extract_road_parts(labels, GeoRaster(image.data[:3], T, CRS),
+                               excess_green_max=0.5)
+    assert _row(loose.segments, 1).passed
 
 
 def _half_ring(radius_m, width_m):
@@ -252,10 +266,10 @@ def test_perfect_segments_of_a_synthetic_scene():
         print(name, "road parts passing %.2f, non-road failing %.2f, %.1f s" % shares[name],
               segments[road].reason.value_counts().to_dict())
         assert result.cues["cues"] == name
-    # the truth's roads of 3-16 m pass unless too short, or under crowns, or on the bridge
-    assert shares["rgb"][0] >= 0.45
-    assert shares["rgb"][1] >= 0.9 and shares["rgb+nir+dsm"][1] == 1.0
-    assert shares["rgb+nir+dsm"][0] >= 0.3
+    # the truth's roads of 3-16 m pass unless short between junctions, under street-tree
+    # crowns (green in the image, high in the DSM) or on the bridge (high in the DSM)
+    assert shares["rgb"][0] >= 0.3 and shares["rgb+nir+dsm"][0] >= 0.3
+    assert shares["rgb"][1] == 1.0 and shares["rgb+nir+dsm"][1] == 1.0
 
 
 def test_segment_polygons_back_to_labels():
