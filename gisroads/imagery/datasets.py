@@ -78,7 +78,7 @@ ETH_PIXEL_M = 0.6
 BUFFER_M = 3.0
 MASSACHUSETTS_BUFFER_M = 4.0
 
-_SPACENET = ("SpaceNet (CosmiQ Works, DigitalGlobe/Maxar), CC BY-SA 4.0")
+_SPACENET = "SpaceNet (CosmiQ Works, DigitalGlobe/Maxar), CC BY-SA 4.0"
 SOURCES = {
     "spacenet_vegas": f"{_SPACENET}; Las Vegas panchromatic tile and road labels from "
                       "CosmiQ/solaris @5315390, solaris/data/",
