@@ -139,12 +139,21 @@ def _last_per_group(groups: np.ndarray, keys: np.ndarray) -> np.ndarray:
 
 def _polygons(compact: np.ndarray, n: int, transform: Affine) -> np.ndarray:
     """One (Multi)Polygon per segment from the pixel outlines."""
-    parts, owner = [], []
-    for geometry, value in rasterio.features.shapes(compact, mask=compact >= 0,
-                                                    transform=transform, connectivity=4):
-        parts.append(shapely.geometry.shape(geometry))
+    rings, owner, ring_polygon = [], [], []
+    for index, (geometry, value) in enumerate(rasterio.features.shapes(
+            compact, mask=compact >= 0, transform=transform, connectivity=4)):
+        rings += geometry["coordinates"]  # the shell, then the holes
+        ring_polygon += [index] * len(geometry["coordinates"])
         owner.append(int(value))
-    parts, owner = np.array(parts, dtype=object), np.array(owner)
+    # built in two vectorised calls: shapely.geometry.shape() per polygon costs more than
+    # the tracing
+    sizes = [len(ring) for ring in rings]
+    ring_of = np.repeat(np.arange(len(rings)), sizes)
+    rings = shapely.linearrings(np.concatenate(rings) if rings else np.empty((0, 2)),
+                                indices=ring_of)
+    parts = shapely.polygons(rings, indices=ring_polygon) if len(rings) else \
+        np.empty(0, dtype=object)
+    owner = np.array(owner, dtype=np.int64)
     order = np.argsort(owner, kind="stable")
     parts, owner = parts[order], owner[order]
     counts = np.bincount(owner, minlength=n)
@@ -280,7 +289,7 @@ def _centreline(rows, cols, half_px_start, half_px_end, transform: Affine, smoot
                         _extend(points, half_px_end, False)])
     x = transform.a * points[:, 0] + transform.b * points[:, 1] + transform.c
     y = transform.d * points[:, 0] + transform.e * points[:, 1] + transform.f
-    return shapely.simplify(shapely.linestrings(x, y), 0.5 * abs(transform.a))
+    return shapely.linestrings(x, y)
 
 
 def _measure(labels: np.ndarray, cues: ImageCues, transform: Affine, crs,
@@ -303,7 +312,7 @@ def _measure(labels: np.ndarray, cues: ImageCues, transform: Affine, crs,
     report(progress, 0.05, "segment outlines")
     polygons = _polygons(compact, n, transform)
     # the pixel staircase would overstate oblique and curved borders: simplify by a pixel
-    perimeter = shapely.length(shapely.simplify(polygons, pixel_m))
+    perimeter = shapely.length(shapely.simplify(polygons, pixel_m, preserve_topology=False))
     hull = shapely.area(shapely.convex_hull(polygons))
     with np.errstate(invalid="ignore", divide="ignore"):
         frame["perimeter_m"] = perimeter
@@ -365,6 +374,7 @@ def _measure(labels: np.ndarray, cues: ImageCues, transform: Affine, crs,
         centrelines[segment] = _centreline(
             paths.rows[take], paths.cols[take], half_start[p], half_end[p], transform,
             smooth_px=int(round(mean_px[p] / 2)))
+    centrelines = shapely.simplify(centrelines, 0.5 * pixel_m)
     # the smoothed line, not the 8-connected pixel path (7 % too long at 30 degrees)
     frame["length_m"] = shapely.length(centrelines)
     columns = SEGMENT_COLUMNS + [f"mean_b{band}" for band in range(1, len(cues.bands) + 1)]
