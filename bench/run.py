@@ -29,6 +29,12 @@ snakes_registration
     registering, and extracting the subclouds chunk by chunk from the LAZ; the 95th
     percentile |dz| of the seen samples against the surface. Baseline: nearest-point
     elevation of every sample (a cKDTree query), no levels and no spline.
+snakes
+    The whole map-guided pipeline (registration, subclouds, attractor maps, GVF, ribbon
+    snakes, network) on a synthetic scene with every feature, its truth edges shifted 3 m and
+    jittered 0.5 m as the map: seconds per km of road and the road-area metrics against the
+    truth polygons. Baseline: the map lines buffered by the true mean road width (what the
+    map alone gives, with the width known).
 imagery_real
     Every image of ../shared/data/imagery (gisroads.imagery.datasets) through the naive
     threshold-morphology-skeleton baseline and, once it exists, the imagery pipeline:
@@ -417,9 +423,51 @@ def case_snakes_registration(out: Path, size_m: float, density: float) -> dict:
             "baseline_p95_dz_all_m": float(np.percentile(np.abs(nearest - truth), 95))}
 
 
+def case_snakes(out: Path, size_m: float, density: float) -> dict:
+    """The whole map-guided pipeline (Boyko & Funkhouser) per km of road, from a LAZ file."""
+    import shapely
+
+    from gisroads.evaluate import area_metrics
+    from gisroads.io.quicklook import write_quicklook
+    from gisroads.snakes.pipeline import extract_map_guided
+    from gisroads.synthetic import make_scene, write_cloud
+    from gisroads.synthetic.perturb import perturb_lines
+
+    scene = make_scene(seed=0, size_m=(size_m, size_m))
+    shifted = perturb_lines(scene.truth_edges, shift_m=3.0, jitter_m=0.5, seed=0)
+    road_km = float(shifted.length.sum()) / 1000
+    with tempfile.TemporaryDirectory(dir=out) as tmp:
+        path = Path(tmp) / "cloud.laz"
+        points = write_cloud(scene, path, density_per_m2=density, seed=0)
+        roads, snakes_s = _timed(extract_map_guided, path, shifted, snap_m=8.0)
+    xmin, ymin, xmax, ymax = scene.extent
+    valid = shapely.box(xmin + 5, ymin + 5, xmax - 5, ymax - 5)
+    metrics = area_metrics(roads.network.polygons, scene.truth.polygons, valid_area=[valid])
+    width = float(np.average(scene.truth.centrelines.width_m,
+                             weights=scene.truth.centrelines.length_m))
+    baseline = area_metrics(shapely.buffer(shifted.geometry.values, width / 2,
+                                           cap_style="flat"),
+                            scene.truth.polygons, valid_area=[valid])
+    write_quicklook(out / "snakes.png", [
+        (scene.truth.polygons, dict(color="khaki", alpha=0.6)),
+        (roads.network.qa["ribbon_patches"], dict(facecolor="none", edgecolor="darkorange",
+                                                  linewidth=0.8)),
+        (roads.network.centrelines, dict(color="red", linewidth=1.2, label="ribbon centres")),
+        (shifted, dict(color="blue", linewidth=0.6, linestyle="--", label="map (3 m off)")),
+    ], title=f"ribbon snakes on truth roads (khaki), q = {metrics.quality:.2f}")
+    return {"road_km": road_km, "points": points, "patches": len(roads.ribbons),
+            "converged": sum(r.converged for r in roads.ribbons),
+            "snakes_s_per_km": snakes_s / road_km, **{
+                f"area_{k}": v for k, v in metrics.as_dict().items()
+                if k in ("precision", "recall", "quality", "spill_size_m",
+                         "spill_direction")},
+            "baseline_map_buffer_quality": baseline.quality}
+
+
 CASES = {"synth_cloud": case_synth_cloud, "evaluate": case_evaluate,
          "ground_planes": case_ground_planes, "lidar_tile": case_lidar_tile,
          "snakes_registration": case_snakes_registration,
+         "snakes": case_snakes,
          "lidar_real": case_lidar_real, "imagery_real": case_imagery_real,
          "imagery_tile": case_imagery_tile}
 
@@ -455,6 +503,7 @@ def main() -> None:
             "lidar_tile": {"size_m": 300.0 if args.quick else 500.0, "density": 10.0},
             "snakes_registration": {"size_m": 300.0 if args.quick else 500.0,
                                     "density": 10.0},
+            "snakes": {"size_m": 300.0 if args.quick else 500.0, "density": 10.0},
             "lidar_real": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"
                                            / "data" / "lidar")},
             "imagery_real": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"

@@ -136,6 +136,15 @@ def cmd_blocks(args) -> int:
     return 0
 
 
+def cmd_snakes(args) -> int:
+    from .jobs import snakes_job
+    result = snakes_job(args.input, args.map, args.out, curb_detector=args.curb_detector,
+                        tagged_las=args.tagged_las, attractor_tif=args.attractor,
+                        progress=_ProgressBar(not args.json))
+    _print(result, args.json, "\n".join(f"{k}: {v}" for k, v in result.items()))
+    return 0
+
+
 def cmd_demo(args) -> int:
     from .evaluate import format_report
     from .jobs import demo_job
@@ -251,6 +260,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-edge", type=_positive, default=80.0,
                    help="longest graph edge in metres (default 80, as in the paper)")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the blocks")
+
+    p = add("snakes", cmd_snakes, "road boundaries along a road map (Boyko & Funkhouser)",
+            "Fit the roads of an approximate road map to a LAS/LAZ point cloud: register "
+            "the map in 3D, cut a subcloud per road, build a curb attractor map, its "
+            "gradient vector flow, and fit a ribbon snake from kerb to kerb. Writes road "
+            "centre lines with widths, road polygons (with their level), junctions from the "
+            "map's topology and the QA layers ribbon_patches and registered_map to a "
+            "GeoPackage in the cloud's CRS.")
+    p.add_argument("input", type=Path, help="LAS/LAZ point cloud")
+    p.add_argument("map", type=Path, help="road map lines (GeoPackage, GeoJSON, any OGR "
+                                          "line layer, any CRS)")
+    p.add_argument("-o", "--out", type=Path, required=True, help="output GeoPackage (.gpkg)")
+    p.add_argument("--curb-detector", choices=("exp", "step", "none"), default="exp",
+                   help="height weighting of the curb detector: exp (Gaussian, 15 cm mean, "
+                        "5 cm deviation; default), step (10-20 cm) or none")
+    p.add_argument("--tagged-las", type=Path,
+                   help="also write the cloud with road points classified 11")
+    p.add_argument("--attractor", type=Path, help="also write the attractor map (GeoTIFF)")
 
     p = add("demo", cmd_demo, "run the demo on a synthetic scene",
             "Write a synthetic scene and its truth, degrade the truth into a stand-in "

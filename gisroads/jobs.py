@@ -493,6 +493,64 @@ def register_job(cloud_path, map_source, out_path, *, progress: Progress = None,
             "points_read": len(cloud)}
 
 
+def _map_lines(map_source) -> gpd.GeoDataFrame:
+    """Road map lines from a GeoDataFrame or a line file (a GeoPackage's road_centrelines
+    layer when it has one, else its first layer)."""
+    if isinstance(map_source, gpd.GeoDataFrame):
+        return map_source
+    gpkg = str(map_source).lower().endswith(".gpkg")
+    return read_layer(map_source, CENTRELINES if gpkg and CENTRELINES in
+                      list_layers(map_source) else None)
+
+
+def attractor_job(cloud_path, map_source, out_path, *, curb_detector: str = "exp",
+                  cell_m: float = 0.5, progress: Progress = None, **options) -> dict:
+    """Curb attractor map of the road patches of a map over a cloud (Boyko & Funkhouser,
+    section 2.3), as a GeoTIFF in the cloud's CRS. ``map_source`` as in
+    :func:`snakes_job`; ``options`` go to :func:`gisroads.snakes.pipeline.curb_attractor`.
+    """
+    from .snakes.pipeline import curb_attractor
+
+    attractor = curb_attractor(cloud_path, _map_lines(map_source), curb_detector=curb_detector,
+                               cell_m=cell_m, progress=scaled(progress, 0.0, 0.95), **options)
+    path = write_geotiff(out_path, attractor, band_names=["attractor"])
+    report(progress, 1.0, "done")
+    return {"attractor": path, "max": float(attractor.data.max()),
+            "shape": list(attractor.shape)}
+
+
+def snakes_job(cloud_path, map_source, out_path, *, curb_detector: str = "exp",
+               tagged_las=None, attractor_tif=None, progress: Progress = None,
+               **options) -> dict:
+    """Map-guided road extraction with ribbon snakes (Boyko & Funkhouser, 2011).
+
+    ``map_source``: a line file (a GeoPackage's road_centrelines layer, else its first;
+    GeoJSON, any OGR format) or a GeoDataFrame, in any CRS: reprojected to the cloud's.
+    Writes ``out_path`` (road_centrelines, road_polygons, junctions and the QA layers
+    ribbon_patches and registered_map) in the cloud's CRS; optionally ``tagged_las`` (the
+    cloud with road points in class 11) and ``attractor_tif`` (the patches' attractor
+    maps). ``options`` go to :func:`gisroads.snakes.pipeline.extract_map_guided`.
+    """
+    from .snakes.pipeline import extract_map_guided
+
+    roads = extract_map_guided(cloud_path, _map_lines(map_source), curb_detector=curb_detector,
+                               tagged_las=tagged_las, progress=scaled(progress, 0.0, 0.95),
+                               **options)
+    network = roads.network
+    write_geopackage(out_path, network.layers())
+    result = {"gpkg": Path(out_path), "roads": len(network.centrelines),
+              "length_m": float(network.centrelines.length_m.sum()),
+              "junctions": len(network.junctions), "patches": len(roads.ribbons),
+              "converged": sum(r.converged for r in roads.ribbons)}
+    if tagged_las is not None:
+        result.update(tagged_las=Path(tagged_las), tagged_points=roads.tagged_points)
+    if attractor_tif is not None and roads.attractor is not None:
+        result["attractor"] = write_geotiff(attractor_tif, roads.attractor,
+                                            band_names=["attractor"])
+    report(progress, 1.0, "done")
+    return result
+
+
 def demo_job(out_dir, *, seed: int = 0, progress: Progress = None) -> dict:
     """The demo: a synthetic scene, its truth, a degraded copy scored against it, a PNG.
 

@@ -8,6 +8,14 @@ LIDAR = SHARED_DATA / "lidar"
 
 
 @pytest.fixture(scope="session")
+def shared_data() -> Path:
+    if not SHARED_DATA.is_dir():
+        pytest.fail(f"real sample data missing: {SHARED_DATA} (../shared must sit beside the "
+                    "repo)")
+    return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
 def lidar_dir() -> Path:
     if not LIDAR.is_dir():
         pytest.fail(f"real sample data missing: {LIDAR} (../shared must sit beside the repo)")

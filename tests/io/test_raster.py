@@ -25,9 +25,8 @@ def test_geotiff_round_trip_keeps_georeferencing(tmp_path):
         assert src.profile["tiled"] and src.compression.name == "deflate"
 
 
-def test_plain_png_needs_pixel_size_and_crs():
-    from conftest import SHARED_DATA
-    path = SHARED_DATA / MASSACHUSETTS_PNG
+def test_plain_png_needs_pixel_size_and_crs(shared_data):
+    path = shared_data / MASSACHUSETTS_PNG
     with pytest.raises(RasterError, match="no georeferencing"):
         read_raster(path)
     with pytest.raises(RasterError, match="both"):
