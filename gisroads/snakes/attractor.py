@@ -86,8 +86,9 @@ def pca_normals(points_xyz: np.ndarray, *, k_neighbours: int = MIN_NEIGHBOURS,
         raise ValueError(f"{len(xyz)} points: at least k_neighbours={k_neighbours} are needed")
     tree = cKDTree(xyz) if tree is None else tree
     _, neighbours = tree.query(xyz, k=k_neighbours)
-    local = xyz[neighbours] - xyz[neighbours].mean(axis=1, keepdims=True)
-    covariance = np.einsum("nki,nkj->nij", local, local) / k_neighbours
+    local = xyz[neighbours]
+    local -= local.mean(axis=1, keepdims=True)
+    covariance = np.matmul(local.transpose(0, 2, 1), local) / k_neighbours
     _, vectors = np.linalg.eigh(covariance)   # eigenvalues ascending
     normals = vectors[:, :, 0]
     return normals * np.where(normals[:, 2] < 0, -1.0, 1.0)[:, None], neighbours

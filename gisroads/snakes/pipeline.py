@@ -1,0 +1,455 @@
+"""Map-guided road extraction with ribbon snakes (Boyko & Funkhouser, 2011) as a composition.
+
+register the map in 3D (:mod:`.registration`) -> one subcloud per road patch
+(:mod:`.subclouds`) -> per patch: attractor map (:mod:`.attractor`) -> gradient vector flow
+(:mod:`.gvf`) -> ribbon snake (:mod:`.ribbon`) -> ribbons to the road-network contract
+(:func:`gisroads.vectorize.ribbons.ribbons_to_network`, the conversion the LiDAR pipeline
+shares), one ground level at a time, so that a bridge and the road under it stay two roads
+that do not meet; junctions from the map's topology; road points tagged class 11.
+
+Levels: a ribbon whose centre line crosses another one more than ``clearance_m`` above it
+is one level higher than that one (a bridge over a road); ribbons of one level are
+converted together, and the road polygons carry their ``level``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import geopandas as gpd
+import numpy as np
+import pandas as pd
+import shapely
+from affine import Affine
+from scipy import ndimage
+
+from ..geo import GeoRaster, RoadNetwork
+from ..io.las import cloud_crs, write_classified
+from ..lidar.tagging import ROAD_SURFACE_CLASS
+from ..progress import Progress, report, scaled
+from ..vectorize.ribbons import ribbon_areas, ribbons_to_network
+from .attractor import ALPHA_ATTR, BETA_ATTR, LANE_M, MIN_NEIGHBOURS, attractor_map
+from .gvf import MAX_ITERATIONS as GVF_ITERATIONS
+from .gvf import MU, gradient_vector_flow
+from .ribbon import (ALPHA_SNAKE, BETA_SNAKE, GAMMA_SNAKE, KAPPA_SNAKE, STEP_M,
+                     initial_ribbon, resample_line, ribbon_snake)
+
+METHOD = "boyko-funkhouser"
+#: A crossing ribbon this much higher (metres) passes over the other one: a storey.
+CLEARANCE_M = 2.5
+#: The paper's map is a Cardinal spline through control vertices every 15 m; a digitised or
+#: OpenStreetMap polyline zigzags by its vertex noise instead, and a snake that takes the
+#: zigzag as its rest shape cannot straighten it (rigidity) and comes out too wide
+#: (+0.6 m on a 21 m avenue with 0.5 m vertex noise every 10 m). A Gaussian of this
+#: deviation (metres along the line) smooths the line first.
+SMOOTH_M = 5.0
+
+
+@dataclass
+class Ribbon:
+    """A fitted ribbon snake of one road patch.
+
+    Attributes
+    ----------
+    road_id : int
+        The map road of the patch.
+    centre_xyz : ndarray, shape (n, 3)
+        Centre line (metres); z interpolated from the registered samples.
+    half_width_m : ndarray, shape (n,)
+    converged : bool
+    attractor : GeoRaster
+        The patch's attractor map.
+    level : int
+        Storey (0: the lowest); set by :func:`ribbon_levels`.
+    """
+
+    road_id: int
+    centre_xyz: np.ndarray
+    half_width_m: np.ndarray
+    converged: bool
+    attractor: GeoRaster
+    level: int = 0
+
+    def polygon(self):
+        """The ribbon's surface, kerb to kerb."""
+        return ribbon_areas([shapely.linestrings(self.centre_xyz[:, :2])],
+                            [2 * self.half_width_m])[0]
+
+
+@dataclass
+class MapGuidedRoads:
+    """What :func:`extract_map_guided` returns.
+
+    Attributes
+    ----------
+    network : RoadNetwork
+        Contract layers (polygons with ``level``) and the QA layers ``ribbon_patches``
+        (one polygon per patch: road_id, level, width_m, converged) and
+        ``registered_map`` (the map's 3D lines).
+    ribbons : list of Ribbon
+    attractor : GeoRaster or None
+        The patches' attractor maps on one grid (the largest value where they overlap).
+    registered : RegisteredMap
+    tagged_points : int or None
+        Points classified as road when a tagged copy of the cloud was written.
+    """
+
+    network: RoadNetwork
+    ribbons: list
+    attractor: GeoRaster | None
+    registered: object
+    tagged_points: int | None = None
+
+
+def fit_ribbon(points_xyz: np.ndarray, line_xyz: np.ndarray, plane_normal=(0.0, 0.0, 1.0), *,
+               road_id: int = 0, curb_detector: str = "exp", cell_m: float = 0.5,
+               alpha_attr: float = ALPHA_ATTR, beta_attr: float = BETA_ATTR,
+               k_neighbours: int = MIN_NEIGHBOURS, lane_m: float = LANE_M,
+               mu: float = MU, gvf_iterations: int = GVF_ITERATIONS,
+               alpha: float = ALPHA_SNAKE, beta: float = BETA_SNAKE,
+               gamma: float = GAMMA_SNAKE, kappa: float = KAPPA_SNAKE,
+               step_m: float = STEP_M, max_iterations: int = 500,
+               smooth_m: float = SMOOTH_M, crs=None) -> Ribbon:
+    """Attractor map, GVF and ribbon snake of one road patch (Sec. 2.3-2.4).
+
+    Parameters
+    ----------
+    points_xyz : ndarray, shape (m, 3)
+        The patch's subcloud (metres).
+    line_xyz : ndarray, shape (k, 3) or (k, 2)
+        The patch's registered map samples, in order along the road.
+    plane_normal : array_like, shape (3,) or (m, 3)
+        Support-plane normal of the patch or of each point's sample.
+    curb_detector : {"exp", "step", "none"}
+        f_nExp, f_nStep or f_n (:func:`gisroads.snakes.attractor.curb_response`).
+    cell_m : float
+        Attractor grid cell (metres).
+    alpha_attr, beta_attr, k_neighbours, lane_m
+        Attractor parameters (:func:`gisroads.snakes.attractor.attractor_map`).
+    mu, gvf_iterations
+        GVF parameters (:func:`gisroads.snakes.gvf.gradient_vector_flow`).
+    alpha, beta, gamma, kappa, step_m, max_iterations
+        Snake parameters (:func:`gisroads.snakes.ribbon.ribbon_snake`).
+    smooth_m : float
+        Standard deviation (metres along the line) of the Gaussian that smooths the map
+        line before the snake takes it as its rest shape (see :data:`SMOOTH_M`).
+
+    Returns
+    -------
+    Ribbon
+    """
+    line = np.asarray(line_xyz, float)
+    samples, _ = resample_line(line[:, :2], step_m)
+    if smooth_m > 0:
+        samples = ndimage.gaussian_filter1d(samples, smooth_m / step_m, axis=0, mode="nearest")
+    attractor = attractor_map(points_xyz, line[:, :2], plane_normal, cell_m=cell_m,
+                              alpha=alpha_attr, beta=beta_attr, detector=curb_detector,
+                              k_neighbours=k_neighbours, lane_m=lane_m, crs=crs)
+    u, v = gradient_vector_flow(attractor.data, mu=mu, iterations=gvf_iterations)
+    shift, half = initial_ribbon(attractor, samples, step_m=step_m, min_width_m=lane_m,
+                                 reach_m=6 * lane_m)
+    centre, half_width, converged = ribbon_snake(
+        u, v, attractor.transform, samples, width0_m=2 * half, shift0_m=shift,
+        alpha=alpha, beta=beta, gamma=gamma, kappa=kappa, step_m=step_m,
+        max_iterations=max_iterations)
+    z = _heights_along(line, centre)
+    return Ribbon(int(road_id), np.column_stack([centre, z]), half_width, bool(converged),
+                  attractor)
+
+
+def _heights_along(line_xyz: np.ndarray, points_xy: np.ndarray) -> np.ndarray:
+    """Heights of the line's nearest samples at points along it (0 for a 2D line)."""
+    if line_xyz.shape[1] < 3:
+        return np.zeros(len(points_xy))
+    stations = np.r_[0.0, np.cumsum(np.hypot(*np.diff(line_xyz[:, :2], axis=0).T))]
+    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(points_xy, axis=0).T))]
+    along *= stations[-1] / max(along[-1], 1e-12)
+    return np.interp(along, stations, line_xyz[:, 2])
+
+
+def ribbon_levels(ribbons: list, *, clearance_m: float = CLEARANCE_M) -> np.ndarray:
+    """Storey of each ribbon: one above the highest ribbon it crosses ``clearance_m`` above.
+
+    Sets ``Ribbon.level`` and returns the levels.
+    """
+    lines = np.array([shapely.linestrings(r.centre_xyz[:, :2]) for r in ribbons], dtype=object)
+    above = {k: set() for k in range(len(ribbons))}
+    if len(lines):
+        i, j = shapely.STRtree(lines).query(lines, predicate="crosses")
+        for a, b in zip(i, j):  # a few crossings
+            crossing = shapely.get_coordinates(shapely.intersection(lines[a], lines[b]))
+            if len(crossing) == 0:
+                continue
+            za, zb = (_height_at(ribbons[k], crossing[0]) for k in (a, b))
+            if za - zb > clearance_m:
+                above[a].add(b)
+    levels = np.zeros(len(ribbons), dtype=np.int64)
+    for _ in range(len(ribbons)):  # longest chain of "passes over", a few storeys
+        new = np.array([max((levels[b] + 1 for b in above[a]), default=0)
+                        for a in range(len(ribbons))], dtype=np.int64)
+        if np.array_equal(new, levels):
+            break
+        levels = new
+    for ribbon, level in zip(ribbons, levels):
+        ribbon.level = int(level)
+    return levels
+
+
+def _height_at(ribbon: Ribbon, xy) -> float:
+    nearest = np.argmin(np.hypot(*(ribbon.centre_xyz[:, :2] - xy).T))
+    return float(ribbon.centre_xyz[nearest, 2])
+
+
+def ribbons_network(ribbons: list, crs, *, map_junctions: gpd.GeoDataFrame | None = None,
+                    qa: dict | None = None, **conversion) -> RoadNetwork:
+    """Road network from fitted ribbons, one level at a time through the shared conversion.
+
+    Parameters
+    ----------
+    ribbons : list of Ribbon
+        With their ``level`` set (:func:`ribbon_levels`).
+    crs
+        CRS of the output layers.
+    map_junctions : GeoDataFrame, optional
+        The map's intersections (``degree``): where given, the junctions are those of degree
+        three or more, each moved onto the nearest end of an extracted road within
+        ``join_gap_m`` plus the widest half width (it stays where the map has it otherwise).
+        Without them, the junctions are the conversion's own, per level.
+    qa : dict of GeoDataFrame, optional
+        Extra QA layers.
+    conversion
+        Options of :func:`gisroads.vectorize.ribbons.ribbons_to_network`.
+
+    Returns
+    -------
+    RoadNetwork
+        ``road_polygons`` and ``road_centrelines`` with ``level``; QA layer
+        ``ribbon_patches``.
+    """
+    levels = np.array([r.level for r in ribbons], dtype=np.int64)
+    parts = []
+    for level in np.unique(levels):  # a few storeys
+        chosen = [r for r in ribbons if r.level == level]
+        frame = gpd.GeoDataFrame(
+            {"widths_m": [2 * r.half_width_m for r in chosen]},
+            geometry=gpd.GeoSeries([shapely.linestrings(r.centre_xyz[:, :2]) for r in chosen],
+                                   crs=crs), crs=crs)
+        parts.append((level, ribbons_to_network(frame, method=METHOD, **conversion)))
+    patches = gpd.GeoDataFrame(
+        {"road_id": np.array([r.road_id for r in ribbons], dtype=np.int64),
+         "level": levels,
+         "width_m": np.array([2 * float(np.mean(r.half_width_m)) for r in ribbons]),
+         "converged": np.array([r.converged for r in ribbons], dtype=bool)},
+        geometry=gpd.GeoSeries([r.polygon() for r in ribbons], crs=crs), crs=crs)
+    layers = {"ribbon_patches": patches, **(qa or {})}
+    if not parts:
+        return ribbons_to_network(gpd.GeoDataFrame({"width_m": []}, geometry=gpd.GeoSeries(
+            [], crs=crs), crs=crs), method=METHOD, qa=layers)
+    offset = 0
+    lines, polygons, junctions = [], [], []
+    for level, network in parts:
+        for frame, out in ((network.centrelines, lines), (network.polygons, polygons)):
+            frame = frame.copy()
+            frame["road_id"] = frame["road_id"] + offset
+            frame["level"] = level
+            out.append(frame)
+        junctions.append(network.junctions)
+        offset += len(network.centrelines)
+    centrelines = pd.concat(lines, ignore_index=True)
+    network = RoadNetwork(gpd.GeoDataFrame(centrelines, crs=crs),
+                          gpd.GeoDataFrame(pd.concat(polygons, ignore_index=True), crs=crs),
+                          _junctions(junctions, map_junctions, centrelines, ribbons,
+                                     conversion.get("join_gap_m", 5.0), crs),
+                          layers)
+    return network
+
+
+def _junctions(per_level, map_junctions, centrelines, ribbons, join_gap_m, crs):
+    if map_junctions is None:
+        frame = pd.concat(per_level, ignore_index=True)
+        frame["junction_id"] = np.arange(len(frame), dtype=np.int64)
+        return gpd.GeoDataFrame(frame, crs=crs)
+    nodes = map_junctions[map_junctions["degree"] >= 3]
+    xy = shapely.get_coordinates(nodes.geometry.values)
+    ends = shapely.get_coordinates(np.concatenate([
+        shapely.get_point(centrelines.geometry.values, 0),
+        shapely.get_point(centrelines.geometry.values, -1)])) if len(centrelines) else \
+        np.empty((0, 2))
+    if len(ends) and len(xy):
+        reach = join_gap_m + max(float(np.max(r.half_width_m)) for r in ribbons)
+        distance = np.hypot(*(xy[:, None, :] - ends[None, :, :]).transpose(2, 0, 1))
+        nearest = np.argmin(distance, axis=1)
+        close = distance[np.arange(len(xy)), nearest] <= reach
+        xy = np.where(close[:, None], ends[nearest], xy)
+    return gpd.GeoDataFrame(
+        {"junction_id": np.arange(len(xy), dtype=np.int64),
+         "degree": nodes["degree"].to_numpy(np.int64)},
+        geometry=gpd.GeoSeries(shapely.points(xy), crs=crs), crs=crs)
+
+
+def mosaic(rasters: list, *, crs=None) -> GeoRaster | None:
+    """Rasters on one grid of the same (north-up, aligned) cells; the largest value where
+    they overlap, 0 elsewhere."""
+    if not rasters:
+        return None
+    cell = rasters[0].pixel_size
+    bounds = np.array([r.bounds for r in rasters])
+    xmin, ymin = bounds[:, 0].min(), bounds[:, 1].min()
+    xmax, ymax = bounds[:, 2].max(), bounds[:, 3].max()
+    shape = (int(round((ymax - ymin) / cell)), int(round((xmax - xmin) / cell)))
+    out = np.zeros(shape, dtype=np.float32)
+    for r in rasters:  # one per patch
+        row0 = int(round((ymax - r.transform.f) / cell))
+        col0 = int(round((r.transform.c - xmin) / cell))
+        rows, cols = r.shape
+        window = out[row0:row0 + rows, col0:col0 + cols]
+        np.maximum(window, r.data, out=window)
+    return GeoRaster(out, Affine(cell, 0.0, xmin, 0.0, -cell, ymax),
+                     crs if crs is not None else rasters[0].crs)
+
+
+def road_point_indices(patches: list, ribbons: list) -> np.ndarray:
+    """Sorted unique file indices of the patches' points inside their ribbon (Sec. 2.5)."""
+    chosen = []
+    for patch, ribbon in zip(patches, ribbons):  # one per road patch
+        area = ribbon.polygon()
+        shapely.prepare(area)
+        inside = shapely.contains_xy(area, patch.points[:, 0], patch.points[:, 1])
+        chosen.append(np.asarray(patch.point_index)[inside])
+    return np.unique(np.concatenate(chosen)) if chosen else np.empty(0, dtype=np.int64)
+
+
+def tag_cloud(source, target, road_indices: np.ndarray, *,
+              road_class: int = ROAD_SURFACE_CLASS) -> int:
+    """Copy a LAS/LAZ file with the points at ``road_indices`` (file order) classified
+    ``road_class``, streamed; returns the number of points tagged."""
+    road_indices = np.asarray(road_indices, dtype=np.int64)
+    start = 0
+
+    def classify(chunk):
+        nonlocal start
+        lo, hi = np.searchsorted(road_indices, [start, start + len(chunk)])
+        classes = chunk.classification.copy()
+        classes[road_indices[lo:hi] - start] = road_class
+        start += len(chunk)
+        return classes
+
+    write_classified(source, target, classify)
+    return len(road_indices)
+
+
+def map_patches(cloud_path, map_lines: gpd.GeoDataFrame, *, snap_m: float | None = None,
+                progress: Progress = None):
+    """Register a road map on a LAS/LAZ file and cut its road patches (Sec. 2.1-2.2).
+
+    The map (any CRS) is reprojected to the cloud's metre CRS; only the points along its
+    lines are read for the registration, and the patches are read chunk by chunk.
+
+    Returns
+    -------
+    registered : RegisteredMap
+    patches : list of RoadPatch
+        Those with enough points and samples for a ribbon.
+    crs : pyproj.CRS or None
+    """
+    from .registration import SNAP_M, SUPPORT_RADIUS_M, register_map
+    from .subclouds import read_corridor, road_patches
+
+    lines = map_lines[map_lines.geometry.notna() & ~map_lines.geometry.is_empty]
+    if len(lines) == 0:
+        raise ValueError("the road map holds no line")
+    working, _ = cloud_crs(cloud_path)
+    if working is not None:
+        if lines.crs is None:
+            raise ValueError("the road map has no CRS; cannot match it to the cloud")
+        lines = lines.to_crs(working)
+    snap = SNAP_M if snap_m is None else snap_m
+    report(progress, 0.0, "reading the points along the map")
+    along = shapely.get_coordinates(shapely.segmentize(lines.geometry.values, 0.5))
+    cloud, _ = read_corridor(cloud_path, along, SUPPORT_RADIUS_M + snap + 0.5)
+    if len(cloud) == 0:
+        raise ValueError(f"{cloud_path}: no point lies along the map's lines; "
+                         "does the map cover the cloud?")
+    registered = register_map(lines, cloud, snap_m=snap, progress=scaled(progress, 0.1, 0.6))
+    del cloud
+    report(progress, 0.6, "cutting the road patches")
+    patches = [p for p in road_patches(registered, cloud_path, progress=scaled(progress, 0.6, 1))
+               if len(p.points) >= MIN_NEIGHBOURS and len(p.samples_xyz) >= 2]
+    if not patches:
+        raise ValueError(f"{cloud_path}: no road patch holds enough points along the map")
+    return registered, patches, working if working is not None else lines.crs
+
+
+def curb_attractor(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector: str = "exp",
+                   cell_m: float = 0.5, snap_m: float | None = None,
+                   progress: Progress = None, **attractor_options) -> GeoRaster:
+    """The attractor maps of every road patch of a map over a cloud, on one grid (Sec. 2.3).
+
+    ``attractor_options`` go to :func:`gisroads.snakes.attractor.attractor_map`; where
+    patches overlap the largest value is kept (:func:`mosaic`).
+    """
+    _, patches, crs = map_patches(cloud_path, map_lines, snap_m=snap_m,
+                                  progress=scaled(progress, 0.0, 0.5))
+    maps = []
+    for k, patch in enumerate(patches):  # one per road patch
+        report(progress, 0.5 + 0.5 * k / len(patches), f"attractor {k + 1} of {len(patches)}")
+        maps.append(attractor_map(patch.points, patch.samples_xyz[:, :2],
+                                  np.asarray(patch.plane_normal)[patch.sample_index],
+                                  cell_m=cell_m, detector=curb_detector, crs=crs,
+                                  **attractor_options))
+    report(progress, 1.0, "done")
+    return mosaic(maps, crs=crs)
+
+
+def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector: str = "exp",
+                       cell_m: float = 0.5, snap_m: float | None = None, tagged_las=None,
+                       clearance_m: float = CLEARANCE_M, progress: Progress = None,
+                       **fit_options) -> MapGuidedRoads:
+    """Roads of a LAS/LAZ file along an approximate road map (Boyko & Funkhouser, 2011).
+
+    Parameters
+    ----------
+    cloud_path : str or Path
+    map_lines : GeoDataFrame
+        Road map lines in any CRS (reprojected to the cloud's metre CRS).
+    curb_detector : {"exp", "step", "none"}
+        f_nExp (the paper's best), f_nStep or f_n.
+    cell_m : float
+        Attractor grid cell (metres).
+    snap_m : float, optional
+        Snapping tolerance of the map's intersections (metres; the registration's default).
+    tagged_las : str or Path, optional
+        Where to write the cloud with the road points in class 11.
+    clearance_m : float
+        Height (metres) above which a crossing ribbon passes over another (a bridge).
+    progress : callable, optional
+    fit_options
+        Passed to :func:`fit_ribbon`.
+
+    Returns
+    -------
+    MapGuidedRoads
+    """
+    registered, patches, crs = map_patches(cloud_path, map_lines, snap_m=snap_m,
+                                           progress=scaled(progress, 0.0, 0.35))
+    ribbons = []
+    for k, patch in enumerate(patches):  # one per road patch
+        report(progress, 0.35 + 0.45 * k / len(patches),
+               f"ribbon snake {k + 1} of {len(patches)}")
+        ribbons.append(fit_ribbon(
+            patch.points, patch.samples_xyz,
+            np.asarray(patch.plane_normal)[np.asarray(patch.sample_index)],
+            road_id=patch.road_id, curb_detector=curb_detector, cell_m=cell_m, crs=crs,
+            **fit_options))
+    ribbon_levels(ribbons, clearance_m=clearance_m)
+    report(progress, 0.8, "building the road network")
+    network = ribbons_network(
+        ribbons, crs, map_junctions=registered.intersections,
+        qa={"registered_map": registered.lines[["road_id", "length_m", "seen_fraction",
+                                                "geometry"]]})
+    tagged = None
+    if tagged_las is not None:
+        report(progress, 0.9, "tagging road points")
+        tagged = tag_cloud(cloud_path, tagged_las, road_point_indices(patches, ribbons))
+    report(progress, 1.0, "done")
+    return MapGuidedRoads(network, ribbons, mosaic([r.attractor for r in ribbons], crs=crs),
+                          registered, tagged)

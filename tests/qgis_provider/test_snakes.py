@@ -1,0 +1,74 @@
+"""'Curb attractor map' and 'Ribbon-snake road boundaries' run by the real qgis_process.bin."""
+import numpy as np
+import pytest
+import shapely
+
+from gisroads.evaluate import area_metrics
+from gisroads.io.las import read_las
+from gisroads.io.raster import read_raster
+from gisroads.io.vector import list_layers, read_layer, write_geopackage
+from gisroads.snakes.ribbon import sample_bilinear
+from gisroads.synthetic import make_scene, road_surface_mask, write_cloud
+from gisroads.synthetic.perturb import perturb_lines
+
+
+@pytest.fixture(scope="module")
+def streets(tmp_path_factory):
+    """A 300 m grid of kerbed streets at 8 points/m2, and a map of its edges shifted 2.5 m
+    and jittered, in geographic coordinates (the algorithms reproject it)."""
+    out = tmp_path_factory.mktemp("snakes")
+    scene = make_scene(seed=4, size_m=(300.0, 300.0), features=())
+    write_cloud(scene, out / "cloud.laz", density_per_m2=8.0, seed=0)
+    shifted = perturb_lines(scene.truth_edges, shift_m=2.5, jitter_m=0.3, seed=3)
+    write_geopackage(out / "map.gpkg", {"osm_lines": shifted.to_crs("EPSG:4326")})
+    return scene, out
+
+
+def test_ribbon_snakes_find_the_road_area(qgis_process, streets, tmp_path):
+    scene, folder = streets
+    result = qgis_process.run("ribbonsnakeroads", INPUT=folder / "cloud.laz",
+                              MAP=f"{folder / 'map.gpkg'}|layername=osm_lines", SNAP=6.0,
+                              OUTPUT=tmp_path / "roads.gpkg", TAGGED_LAS=tmp_path / "t.laz",
+                              ATTRACTOR=tmp_path / "a.tif")
+    layers = set(list_layers(tmp_path / "roads.gpkg"))
+    assert {"road_centrelines", "road_polygons", "junctions", "ribbon_patches",
+            "registered_map"} <= layers
+    polygons = read_layer(tmp_path / "roads.gpkg", "road_polygons")
+    assert polygons.crs == read_las(folder / "cloud.laz").crs
+    xmin, ymin, xmax, ymax = scene.extent
+    valid = shapely.box(xmin + 5, ymin + 5, xmax - 5, ymax - 5)
+    metrics = area_metrics(polygons, scene.truth.polygons, valid_area=[valid])
+    print("qgis ribbon snakes:", metrics.as_dict())
+    assert metrics.quality >= 0.8
+    lines = read_layer(tmp_path / "roads.gpkg", "road_centrelines")
+    truth = shapely.union_all(scene.truth.centrelines.geometry.values)
+    probes = shapely.line_interpolate_point(lines.geometry.values, 0.5, normalized=True)
+    assert np.median(shapely.distance(probes, truth)) < 1.0   # the map was 2.5 m off
+    assert result["ROADS"] == len(lines) > 0
+    tagged = read_las(tmp_path / "t.laz")
+    road = tagged.classification == 11
+    truth_road = road_surface_mask(scene, tagged.xyz)
+    assert (road & truth_road).sum() >= 0.85 * road.sum()        # tagged points are road
+    assert (road & truth_road).sum() >= 0.8 * truth_road.sum()   # most road points tagged
+    assert read_raster(tmp_path / "a.tif").data.max() > 0.5
+
+
+def test_the_curb_attractor_is_bright_on_the_kerbs_and_dark_mid_road(qgis_process, streets,
+                                                                     tmp_path):
+    scene, folder = streets
+    qgis_process.run("curbattractormap", INPUT=folder / "cloud.laz",
+                     MAP=f"{folder / 'map.gpkg'}|layername=osm_lines", SNAP=6.0,
+                     OUTPUT=tmp_path / "attractor.tif")
+    raster = read_raster(tmp_path / "attractor.tif")
+    a = raster.data[0] if raster.data.ndim == 3 else raster.data
+    xmin, ymin, xmax, ymax = scene.extent
+    inner = shapely.box(xmin + 30, ymin + 30, xmax - 30, ymax - 30)
+    roads = shapely.union_all(scene.truth.polygons.geometry.values)
+    kerb = shapely.intersection(shapely.boundary(roads), inner)
+    kerb_xy = shapely.get_coordinates(shapely.segmentize(kerb, 1.0))
+    middle = shapely.intersection(
+        shapely.union_all(scene.truth.centrelines.geometry.values), inner)
+    middle_xy = shapely.get_coordinates(shapely.segmentize(middle, 1.0))
+    on_kerb = sample_bilinear(a.astype(float), raster.transform, kerb_xy)
+    mid_road = sample_bilinear(a.astype(float), raster.transform, middle_xy)
+    assert np.median(on_kerb) > 3 * np.median(mid_road) + 0.1
