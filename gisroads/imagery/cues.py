@@ -327,18 +327,34 @@ class ImageCues:
     nir_band: int | None = None
     exg: np.ndarray | None = None
 
-    @property
-    def used(self) -> tuple[str, ...]:
-        """The cues in use, e.g. ``("rgb", "nir", "dsm")``."""
-        return (self.kind,) + (("nir",) if self.ndvi is not None else ()) + \
-            (("dsm",) if self.ndsm is not None else ())
-
     def record(self) -> dict:
-        """What a run used, for an output's metadata: ``{"cues": "rgb+nir+dsm", "image":
-        "rgb", "bands": 4, "nir_band": 4, "ndvi": True, "dsm": True}``."""
-        return {"cues": "+".join(self.used), "image": self.kind, "bands": len(self.bands),
-                "nir_band": self.nir_band, "ndvi": self.ndvi is not None,
-                "dsm": self.ndsm is not None}
+        """What a run used (see :func:`cues_used`)."""
+        return _record(len(self.bands), self.nir_band, self.ndvi is not None,
+                       self.ndsm is not None)
+
+
+def _record(band_count: int, nir_band: int | None, ndvi: bool, dsm: bool) -> dict:
+    kind = image_kind(band_count, nir_band)
+    used = [kind] + (["nir"] if ndvi else []) + (["dsm"] if dsm else [])
+    return {"cues": "+".join(used), "image": kind, "bands": band_count,
+            "nir_band": nir_band, "ndvi": ndvi, "dsm": dsm}
+
+
+def cues_used(image: GeoRaster, *, nir_band: int | None = None,
+              dsm: GeoRaster | None = None) -> dict:
+    """Which cues a run on ``image`` uses, for an output's metadata, without computing them.
+
+    Returns
+    -------
+    dict
+        e.g. ``{"cues": "rgb+nir+dsm", "image": "rgb", "bands": 4, "nir_band": 4,
+        "ndvi": True, "dsm": True}``; ``image`` is ``"pan"``, ``"cir"`` or ``"rgb"``
+        (:func:`image_kind`).
+    """
+    count = len(_bands(image))
+    if nir_band is not None:
+        nir_band = _check_band(nir_band, count, "NIR")
+    return _record(count, nir_band, nir_band is not None, dsm is not None)
 
 
 def image_kind(band_count: int, nir_band: int | None) -> str:

@@ -3,8 +3,8 @@ import pytest
 from affine import Affine
 
 from gisroads.geo import GeoRaster
-from gisroads.imagery.cues import (excess_green, ground_surface, image_cues, intensity, ndvi,
-                                   normalised_dsm, resample_to, scale_bands)
+from gisroads.imagery.cues import (cues_used, excess_green, ground_surface, image_cues,
+                                   intensity, ndvi, normalised_dsm, resample_to, scale_bands)
 
 CRS = "EPSG:32633"
 T = Affine(0.5, 0, 500000.0, 0, -0.5, 4500100.0)
@@ -128,3 +128,8 @@ def test_image_cues_record_which_cues_were_used():
     pan = image_cues(GeoRaster(rgbn[0], T, CRS))
     assert pan.record()["cues"] == "pan" and pan.ndvi is None and pan.ndsm is None
     assert pan.exg is None
+    # the same record without computing anything
+    assert cues_used(GeoRaster(rgbn, T, CRS), nir_band=4, dsm=dsm) == full.record()
+    assert cues_used(GeoRaster(rgbn[0], T, CRS)) == pan.record()
+    with pytest.raises(ValueError, match="NIR band 7"):
+        cues_used(GeoRaster(rgbn, T, CRS), nir_band=7)
