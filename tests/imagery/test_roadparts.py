@@ -223,10 +223,11 @@ def test_bad_input_is_refused_with_a_clear_error():
 def test_no_data_and_thin_segments():
     labels, image = _paint([])
     labels[:, :300] = -1                 # the west half has no data
-    labels[100:102, 300:500] = 7         # a 0.5 m wide line: no interior, no centre line
+    # a 0.5 m wide line (no interior, no centre line) with a sparse id (no lookup table)
+    labels[100:102, 300:500] = 2 ** 30
     segments, parts = filter_road_parts(measure_segments(labels, image))
-    assert list(segments.segment_id) == [0, 7]
-    thin = _row(segments, 7)
+    assert list(segments.segment_id) == [0, 2 ** 30]
+    thin = _row(segments, 2 ** 30)
     assert np.isnan(thin.length_m) and np.isnan(thin.width_m) and thin.centreline is None
     assert thin.reason == "too narrow" and not thin.passed
     assert _row(segments, 0).area_m2 == pytest.approx((300 * 600 - 2 * 200) * PX ** 2)
