@@ -24,8 +24,8 @@ attribute and its centre line), :func:`filter_road_parts` (``passed``, ``reason`
 
 Centre line
     The segments' interiors (segment pixels whose four neighbours belong to the same
-    segment) are skeletonised together; on each segment's skeleton the longest path (a
-    double Dijkstra sweep over all skeletons at once) is its centre line. The tapering
+    segment) are skeletonised, each in its own window; on each segment's skeleton the
+    longest path (a double Dijkstra sweep over all skeletons at once) is its centre line. The tapering
     ends of that path, where it runs into the corners of the part, are trimmed (pixels
     whose distance to the border is below ``TAPER_FRACTION`` of the path's median, counted
     from each end), the rest is smoothed and extended at both ends by the local half width
@@ -59,7 +59,8 @@ WIDTH_OFFSET_PX = 1.5
 """Width = 2 x distance to the nearest border pixel + this. The border pixel's outer edge is
 half a pixel beyond its centre on each side (+1), and a discrete centre line of an
 even-width part lies half a pixel off the true centre (-1 for even widths, 0 for odd:
-+0.5 on average); measured on strips 3-16 m wide at any angle the error is within 0.5 px."""
++0.5 on average). On strips 3-16 m wide at 0.25 m pixels and angles 0-71 degrees the
+error is -0.07 m on average, at most 0.38 m (at 45 degrees)."""
 NDVI_SPAN = 0.2
 """The NDVI score of :func:`road_part_quality` rises from 0 to 1 over this much below
 the NDVI threshold."""
