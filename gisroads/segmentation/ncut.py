@@ -197,8 +197,10 @@ def ncut(affinity, n_segments: int, *, seed: int = 0) -> np.ndarray:
     else:
         subgraph = weights[connected][:, connected]
         _, vectors = leading_eigenpairs(subgraph, k_connected, seed=seed)
-        degree = np.asarray(subgraph.sum(axis=1)).ravel()
-        labels[connected] = _discretise(vectors / np.sqrt(degree)[:, None], seed)
+        # Shi & Malik's generalized eigenvectors are these scaled per node by D^-1/2; the
+        # discretisation normalises every row, which undoes that scaling, so it is skipped
+        # (a node of nearly zero degree would overflow it)
+        labels[connected] = _discretise(vectors, seed)
     return _canonical(labels)
 
 
