@@ -289,14 +289,15 @@ def segments_to_frame(labels, raster: GeoRaster) -> gpd.GeoDataFrame:
                             crs=raster.crs)
 
 
-def frame_to_labels(frame: gpd.GeoDataFrame, raster: GeoRaster) -> np.ndarray:
+def frame_to_labels(frame: gpd.GeoDataFrame, raster: GeoRaster, *,
+                    id_column: str = "segment_id") -> np.ndarray:
     """A segment layer (from :func:`segments_to_frame`, perhaps edited in QGIS) burnt back
     into labels on ``raster``'s grid, each segment one 4-connected region.
 
-    Pixels are burnt by their centres with the polygons' ``segment_id``
+    Pixels are burnt by their centres with the polygons' ``id_column``
     (:func:`gisroads.imagery.roadparts.rasterize_segments`); a segment an edit left in
     several pieces becomes several segments, and the result is renumbered ``0..m-1`` in
     raster order, as :func:`segment_image` returns it. -1 outside every polygon.
     """
-    burnt = rasterize_segments(frame, raster)
+    burnt = rasterize_segments(frame, raster, id_column=id_column)
     return (connected_regions(burnt, background=-1, connectivity=1) - 1).astype(np.int32)

@@ -1,0 +1,127 @@
+"""Segment grouping: adjacent segments merged with Grote & Rottensteiner's criteria and fuzzy
+rules (2010, Sec. 2.1.2), junction-spanning segments split."""
+from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutputNumber,
+                       QgsProcessingParameterBand, QgsProcessingParameterBoolean,
+                       QgsProcessingParameterFeatureSink, QgsProcessingParameterFeatureSource,
+                       QgsProcessingParameterField, QgsProcessingParameterNumber,
+                       QgsProcessingParameterRasterLayer)
+
+from gisroads.imagery.segments import frame_to_labels, segments_to_frame
+from gisroads.io.raster import read_raster
+from gisroads.segmentation.grouping import CRITERIA, MIN_BRANCH_M, group_segments
+
+from ..convert import gisroads_errors, progress_callback, source_to_frame
+from .base import GisroadsAlgorithm
+from .image_segmentation import write_segments
+
+# criterion: (label, help); each gets a "poor" and a "very good" limit parameter
+LIMITS = {
+    "colour": ("colour-histogram difference", "0 same colours, 1 disjoint histograms"),
+    "edge": ("edge strength along the border",
+             "mean local energy along the shared border over the typical border's"),
+    "convexity": ("convexity of the merged region", "area / convex-hull area"),
+    "border_m": ("shared border length (metres)", "absolute"),
+    "border_rel": ("relative shared border", "shared border / shorter segment perimeter"),
+    "height_m": ("mean height difference (metres)", "from the DSM; used only with one"),
+    "ndvi": ("mean NDVI difference", "used only with a NIR band"),
+}
+
+
+class SegmentGrouping(GisroadsAlgorithm):
+    NAME = "segmentgrouping"
+    DISPLAY_NAME = "Segment grouping"
+    GROUP = "Imagery"
+    HELP = (
+        "<p>Merges adjacent segments of an over-segmentation (e.g. from <i>NCut "
+        "segmentation (imagery)</i>, possibly edited) into larger segments, following "
+        "Grote &amp; Rottensteiner (2010, Sec. 2.1.2).</p>"
+        "<p>Criteria per pair of neighbours: difference of the colour histograms, edge "
+        "strength along the shared border, convexity of the merged region, shared border "
+        "length (absolute and relative to the shorter perimeter), and the mean height "
+        "difference from a DSM and the mean NDVI difference when given. Each criterion is "
+        "rated between a <i>poor</i> and a <i>very good</i> limit; fuzzy rules make a pair "
+        "a candidate when all criteria are good, or when two or three of edge, colour and "
+        "convexity are very good (then one border criterion may be poor). Height and NDVI "
+        "are never outweighed. In each iteration the best share of candidates (the paper's "
+        "10 %) is merged. Finally, segments whose skeleton has three or more long branches "
+        "(they span a junction) are split into their arms.</p>"
+        "<p>Output: grouped segment polygons with <i>segment_id</i> and <i>area_px</i>, the "
+        "input of road-part shape filtering.</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        double = QgsProcessingParameterNumber.Double
+        params = [
+            (QgsProcessingParameterRasterLayer("IMAGE", self.tr("Image")),
+             "the image the segments were made from (RGB, CIR or panchromatic)"),
+            (QgsProcessingParameterFeatureSource("SEGMENTS", self.tr("Segments"),
+                                                 [QgsProcessing.TypeVectorPolygon]),
+             "segment polygons in the image's CRS"),
+            (QgsProcessingParameterField("ID_FIELD", self.tr("Segment id field"),
+                                         "segment_id", "SEGMENTS",
+                                         QgsProcessingParameterField.Numeric, optional=True),
+             "non-negative integer id of each segment (segment_id when empty)"),
+            (QgsProcessingParameterBand("NIR_BAND", self.tr("Near-infrared band"), None,
+                                        "IMAGE", optional=True),
+             "optional: adds the NDVI criterion and leaves NIR out of the edges"),
+            (QgsProcessingParameterRasterLayer("DSM", self.tr("DSM"), optional=True),
+             "optional: surface heights in metres; adds the height criterion"),
+            (QgsProcessingParameterNumber("MERGE_FRACTION",
+                                          self.tr("Share of candidates merged per iteration"),
+                                          double, 0.1, minValue=0.001, maxValue=1.0),
+             "the paper merges the best 10 % of candidate pairs per iteration"),
+            (QgsProcessingParameterNumber("MAX_ITERATIONS", self.tr("Most iterations"),
+                                          QgsProcessingParameterNumber.Integer, 200,
+                                          minValue=1),
+             "the grouping stops earlier when no pair is a candidate"),
+            (QgsProcessingParameterBoolean("SPLIT", self.tr("Split segments spanning "
+                                                            "junctions"), True),
+             "cut segments whose skeleton has three or more long branches into their arms"),
+            (QgsProcessingParameterNumber("MIN_BRANCH", self.tr("Long branch (metres)"),
+                                          double, MIN_BRANCH_M, minValue=0.0),
+             "length a skeleton branch must reach beyond the junction to count as an arm"),
+        ]
+        for criterion, (label, text) in LIMITS.items():
+            poor, very_good = CRITERIA[criterion]
+            for suffix, value, word in (("POOR", poor, "poor"),
+                                        ("GOOD", very_good, "very good")):
+                params.append((QgsProcessingParameterNumber(
+                    f"{criterion.upper()}_{suffix}", self.tr(f"{label.capitalize()}: {word}"),
+                    double, value), f"{text}; the value rated {word}"))
+        params.append((QgsProcessingParameterFeatureSink("OUTPUT", self.tr("Grouped segments"),
+                                                         QgsProcessing.TypeVectorPolygon),
+                       "grouped segment polygons with segment_id and area_px"))
+        for param, text in params:
+            param.setHelp(self.tr(text))
+            self.addParameter(param)
+        self.addOutput(QgsProcessingOutputNumber("SEGMENTS", self.tr("Segments after "
+                                                                     "grouping")))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        image_layer = self.parameterAsRasterLayer(parameters, "IMAGE", context)
+        dsm_layer = self.parameterAsRasterLayer(parameters, "DSM", context)
+        segments = source_to_frame(self.parameterAsSource(parameters, "SEGMENTS", context),
+                                   feedback)
+        id_field = (self.parameterAsFields(parameters, "ID_FIELD", context)
+                    or ["segment_id"])[0]
+        nir = self.parameterAsInt(parameters, "NIR_BAND", context) or None
+        criteria = {c: (self.parameterAsDouble(parameters, f"{c.upper()}_POOR", context),
+                        self.parameterAsDouble(parameters, f"{c.upper()}_GOOD", context))
+                    for c in LIMITS}
+        with gisroads_errors():
+            image = read_raster(image_layer.source())
+            dsm = None if dsm_layer is None else read_raster(dsm_layer.source())
+            labels = frame_to_labels(segments, image, id_column=id_field)
+            if (labels < 0).all():
+                raise QgsProcessingException(self.tr("no segment polygon overlaps the image"))
+            grouped = group_segments(
+                labels, image, dsm=dsm, nir_band=nir,
+                merge_fraction=self.parameterAsDouble(parameters, "MERGE_FRACTION", context),
+                max_iterations=self.parameterAsInt(parameters, "MAX_ITERATIONS", context),
+                criteria=criteria,
+                split_branches=self.parameterAsBoolean(parameters, "SPLIT", context),
+                min_branch_m=self.parameterAsDouble(parameters, "MIN_BRANCH", context),
+                progress=progress_callback(feedback))
+            frame = segments_to_frame(grouped, image)
+        output = write_segments(self, parameters, "OUTPUT", context, frame, feedback)
+        feedback.pushInfo(f"{labels.max() + 1} segments grouped into {len(frame)}")
+        return {"OUTPUT": output, "SEGMENTS": len(frame)}
