@@ -96,15 +96,13 @@ def default_counts(raster: GeoRaster) -> tuple[int, int]:
     return max(1, round(valid_px / segment_px)), max(1, round(valid_px / superpixel_px))
 
 
-def ndvi_affinity(superpixels: np.ndarray, adjacency, superpixel_ndvi: np.ndarray, *,
+def ndvi_affinity(adjacency, superpixel_ndvi: np.ndarray, *,
                   ndvi_threshold: float = NDVI_THRESHOLD,
                   w_ndvi: float = W_NDVI) -> sparse.csr_matrix:
     """The NDVI factor of the paper as an ``extra_affinity`` of ``ncut_segmentation``.
 
     Parameters
     ----------
-    superpixels : ndarray of int
-        Superpixel ids (``superpixel_graph``); only used for its id count.
     adjacency : scipy.sparse matrix, shape (n, n)
         The superpixel adjacency of :func:`~gisroads.segmentation.ncut.superpixel_graph`.
     superpixel_ndvi : ndarray, shape (n,)
@@ -202,12 +200,12 @@ def segment_image(image: GeoRaster, *, nir_band: int | None = None,
     n_superpixels = default_superpixels if n_superpixels is None else int(n_superpixels)
     n_superpixels = max(n_superpixels, 2 * n_segments)
 
+    if not 0 < w_ndvi <= 1:
+        raise ValueError(f"w_ndvi must lie in (0, 1], got {w_ndvi}")
     report(progress, 0.0, "edges")
     bands = scale_bands(image)
     edges, _ = local_energy(intensity(image, nir_band=nir_band))
     vegetation_index = None if nir_band is None else ndvi(image, nir_band, red_band)
-    if not 0 < w_ndvi <= 1:
-        raise ValueError(f"w_ndvi must lie in (0, 1], got {w_ndvi}")
     report(progress, 0.15, "superpixels")
     superpixels, adjacency, features = superpixel_graph(bands, n_superpixels=n_superpixels,
                                                         mask=~valid)
@@ -229,7 +227,7 @@ def segment_image(image: GeoRaster, *, nir_band: int | None = None,
         with np.errstate(invalid="ignore", divide="ignore"):
             node_ndvi = np.bincount(ids[finite], vegetation_index[superpixels >= 0][finite],
                                     minlength=n_nodes) / counts
-        extra = ndvi_affinity(superpixels, adjacency, node_ndvi,
+        extra = ndvi_affinity(adjacency, node_ndvi,
                               ndvi_threshold=ndvi_threshold, w_ndvi=w_ndvi)
 
     n_patches = max(1, round(n_nodes / SUPERPIXELS_PER_PATCH))

@@ -100,11 +100,11 @@ def test_the_ndvi_factor_separates_verge_from_road_of_equal_brightness():
 
 def test_ndvi_affinity_marks_only_pairs_across_the_threshold():
     adjacency = csr_matrix(np.array([[0, 2, 0], [2, 0, 3], [0, 3, 0]]))
-    factor = ndvi_affinity(np.zeros((2, 2), int), adjacency, np.array([0.5, 0.1, 0.05]),
+    factor = ndvi_affinity(adjacency, np.array([0.5, 0.1, 0.05]),
                            ndvi_threshold=0.2, w_ndvi=0.02).toarray()
     np.testing.assert_array_equal(factor, [[0, 0.02, 0], [0.02, 0, 0], [0, 0, 0]])
     with pytest.raises(ValueError, match="w_ndvi"):
-        ndvi_affinity(None, adjacency, np.zeros(3), w_ndvi=0.0)
+        ndvi_affinity(adjacency, np.zeros(3), w_ndvi=0.0)
 
 
 def test_bad_input_is_refused_with_a_clear_message():
