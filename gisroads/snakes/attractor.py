@@ -30,6 +30,12 @@ by that of an ideal ``dh_avg`` kerb seen by the point's own neighbourhood radius
 to 1, so ``c`` is again a probability-like value in [0, 1] whatever the density; where the
 face is sampled the clip leaves the paper's value of 1.
 
+Drop-offs are this module's addition. A bridge deck has no kerb: its edge is where the
+surface leaves the subcloud's 0.5 m window (the ground is metres below), and an airborne
+cloud has no points on the parapet's face either. So the edge of the area the patch's
+points cover (after closing car-sized gaps and filling enclosed holes) takes the curb value
+``drop_off_weight`` where it is larger, except at the subcloud's own reach.
+
 References
 ----------
 Boyko, A., Funkhouser, T. (2011). Extracting roads from dense point clouds in large scale
@@ -40,6 +46,7 @@ from __future__ import annotations
 import numpy as np
 import shapely
 from affine import Affine
+from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from ..geo import GeoRaster
@@ -55,6 +62,11 @@ DH_MIN_M = 0.10
 DH_MAX_M = 0.20
 MIN_NEIGHBOURS = 20
 DETECTORS = ("exp", "step", "none")
+#: A road surface that drops out of the subcloud's window (a deck's edge) bounds the road as
+#: a kerb does: its cells get this curb value. Gaps up to about twice CLOSE_M (metres) in
+#: the points (a parked car, sparse sampling) do not count as edges.
+DROP_OFF_WEIGHT = 0.5
+CLOSE_M = 1.25
 
 _SPREAD_PERCENTILES = (10.0, 90.0)
 
@@ -182,10 +194,34 @@ def extent_term(x, y, line_xy, *, lane_m: float = LANE_M, min_lanes: float = 1.0
     line_xy : ndarray, shape (k, 2)
         The map line of the patch.
     """
+    distance = line_distance(x, y, line_xy)
+    return ((distance >= min_lanes * lane_m) & (distance <= max_lanes * lane_m)).astype(float)
+
+
+def line_distance(x, y, line_xy) -> np.ndarray:
+    """Distance (metres) of points to a polyline, shaped like ``x`` and ``y`` broadcast."""
     line = shapely.linestrings(np.asarray(line_xy, float)[:, :2])
     x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
-    distance = shapely.distance(shapely.points(x.ravel(), y.ravel()), line).reshape(x.shape)
-    return ((distance >= min_lanes * lane_m) & (distance <= max_lanes * lane_m)).astype(float)
+    return shapely.distance(shapely.points(x.ravel(), y.ravel()), line).reshape(x.shape)
+
+
+def drop_off_edges(counts: np.ndarray, cell_m: float, *, close_m: float = CLOSE_M
+                   ) -> np.ndarray:
+    """Cells on the edge of the area a patch's points cover: where its surface drops out of
+    the subcloud's window (a bridge deck's edge, an embankment), 1.0, else 0.0.
+
+    Gaps narrower than about ``2 close_m`` (cars on the road, sparse sampling) are closed
+    first, and enclosed holes (building footprints, the shadow of a deck) filled.
+    """
+    radius = max(1, int(np.ceil(close_m / cell_m)))
+    rr, cc = np.mgrid[-radius:radius + 1, -radius:radius + 1]
+    disk = rr ** 2 + cc ** 2 <= radius ** 2
+    padded = np.pad(counts > 0, radius, mode="edge")
+    covered = ndimage.binary_fill_holes(
+        ndimage.binary_closing(padded, structure=disk))[radius:-radius, radius:-radius]
+    inner = ndimage.binary_erosion(covered, structure=ndimage.generate_binary_structure(2, 1),
+                                   border_value=1)
+    return (covered & ~inner).astype(float)
 
 
 def patch_grid(line_xy: np.ndarray, *, cell_m: float, reach_m: float) -> tuple[Affine, tuple]:
@@ -198,8 +234,9 @@ def patch_grid(line_xy: np.ndarray, *, cell_m: float, reach_m: float) -> tuple[A
     return Affine(cell_m, 0.0, xmin, 0.0, -cell_m, ymax), shape
 
 
-def cell_means(x, y, values, transform: Affine, shape) -> np.ndarray:
-    """Mean of ``values`` per cell of a north-up grid; 0 in empty cells."""
+def cell_means(x, y, values, transform: Affine, shape, *, with_counts: bool = False):
+    """Mean of ``values`` per cell of a north-up grid, 0 in empty cells (and the number of
+    points per cell with ``with_counts``)."""
     rows, cols = shape
     col = np.floor((np.asarray(x) - transform.c) / transform.a).astype(np.int64)
     row = np.floor((np.asarray(y) - transform.f) / transform.e).astype(np.int64)
@@ -207,14 +244,15 @@ def cell_means(x, y, values, transform: Affine, shape) -> np.ndarray:
     flat = row[inside] * cols + col[inside]
     total = np.bincount(flat, weights=np.asarray(values, float)[inside], minlength=rows * cols)
     count = np.bincount(flat, minlength=rows * cols)
-    return (total / np.maximum(count, 1)).reshape(shape)
+    means = (total / np.maximum(count, 1)).reshape(shape)
+    return (means, count.reshape(shape)) if with_counts else means
 
 
 def attractor_map(points_xyz: np.ndarray, line_xy: np.ndarray, plane_normal=(0.0, 0.0, 1.0),
                   *, cell_m: float = 0.5, alpha: float = ALPHA_ATTR, beta: float = BETA_ATTR,
                   detector: str = "exp", k_neighbours: int = MIN_NEIGHBOURS,
                   lane_m: float = LANE_M, min_lanes: float = 1.0, max_lanes: float = 6.0,
-                  curb=None, crs=None) -> GeoRaster:
+                  drop_off_weight: float = DROP_OFF_WEIGHT, curb=None, crs=None) -> GeoRaster:
     """Attractor map ``a = alpha e + beta c`` of one road patch on a grid (Sec. 2.3).
 
     Parameters
@@ -236,6 +274,9 @@ def attractor_map(points_xyz: np.ndarray, line_xy: np.ndarray, plane_normal=(0.0
         Neighbourhood of the PCA normals (>= 20).
     lane_m, min_lanes, max_lanes : float
         The extent term's lane width (metres) and band (:func:`extent_term`).
+    drop_off_weight : float
+        Curb value given to the edge of the area the points cover (:func:`drop_off_edges`;
+        see the module docstring); 0 gives the paper's map.
     curb : ndarray, shape (n,), optional
         ``c(p)`` already computed (:func:`curb_response`); computed here otherwise.
     crs : optional
@@ -256,10 +297,14 @@ def attractor_map(points_xyz: np.ndarray, line_xy: np.ndarray, plane_normal=(0.0
     if curb is None:
         curb = (curb_response(xyz, plane_normal, k_neighbours=k_neighbours, detector=detector)
                 if len(xyz) >= k_neighbours else np.zeros(len(xyz)))
-    c = cell_means(xyz[:, 0], xyz[:, 1], curb, transform, shape)
+    c, counts = cell_means(xyz[:, 0], xyz[:, 1], curb, transform, shape, with_counts=True)
     rows, cols = shape
     cx = transform.c + (np.arange(cols) + 0.5) * transform.a
     cy = transform.f + (np.arange(rows) + 0.5) * transform.e
-    e = extent_term(cx[None, :], cy[:, None], line, lane_m=lane_m, min_lanes=min_lanes,
-                    max_lanes=max_lanes)
+    distance = line_distance(cx[None, :], cy[:, None], line)
+    e = ((distance >= min_lanes * lane_m) & (distance <= max_lanes * lane_m)).astype(float)
+    if drop_off_weight > 0:
+        # the subcloud's own cut at its reach is no edge of the surface
+        c = np.maximum(c, drop_off_weight * drop_off_edges(counts, cell_m)
+                       * (distance < max_lanes * lane_m - 1.0))
     return GeoRaster((alpha * e + beta * c).astype(np.float32), transform, crs)

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from gisroads.snakes.attractor import (LANE_M, attractor_map, curb_response, extent_term,
-                                       pca_normals, step_weight)
+from gisroads.snakes.attractor import (LANE_M, attractor_map, curb_response, drop_off_edges,
+                                       extent_term, pca_normals, step_weight)
 
 
 def kerb_cloud(step_m=0.15, noise_m=0.0, spacing_m=0.2, seed=0):
@@ -85,7 +85,7 @@ def test_attractor_map_peaks_on_the_kerb_and_carries_the_extent_term():
     xyz = kerb_cloud(noise_m=0.01)
     xyz[:, 1] += 5.0                                   # kerb at y = 5, map line at y = 0
     line = np.array([[-10.0, 0.0], [10.0, 0.0]])
-    a = attractor_map(xyz, line, cell_m=0.5, crs="EPSG:32633")
+    a = attractor_map(xyz, line, cell_m=0.5, crs="EPSG:32633", drop_off_weight=0.0)
     assert a.pixel_size == 0.5 and a.crs is not None
     rows, cols = a.shape
     y = a.transform.f + (np.arange(rows) + 0.5) * a.transform.e
@@ -98,3 +98,31 @@ def test_attractor_map_peaks_on_the_kerb_and_carries_the_extent_term():
     assert np.allclose(profile[flat], 0.2, atol=0.05)
     near = np.abs(y) < 3.5            # closer than a lane: e = 0, flat road: c = 0
     assert profile[near].max() < 0.05
+
+
+def test_drop_off_edges_outline_a_deck_and_ignore_a_parked_car():
+    counts = np.zeros((40, 60), int)
+    counts[10:30, :] = 1                 # an 8 m deck (0.4 m cells) across the grid
+    counts[12:16, 20:25] = 0             # a 1.6 x 2 m car: no point under it
+    counts[::3, ::2] = 0                 # sparse sampling
+    edges = drop_off_edges(counts, 0.4)
+    assert edges[10].all() and edges[29].all()          # both deck edges
+    assert not edges[11:29].any()                       # nothing inside, car included
+    assert not edges[:10].any() and not edges[30:].any()
+
+
+def test_attractor_map_marks_a_kerbless_deck_edge_but_not_the_subclouds_reach():
+    rng = np.random.default_rng(3)
+    xy = rng.uniform([-30, -4], [30, 4], (6000, 2))      # an 8 m deck, flat, no kerb
+    xyz = np.column_stack([xy, np.full(len(xy), 7.0)])
+    line = np.array([[-30.0, 2.0], [30.0, 2.0]])          # map 2 m off the deck's middle
+    a = attractor_map(xyz, line, cell_m=0.5)
+    rows, cols = a.shape
+    y = a.transform.f + (np.arange(rows) + 0.5) * a.transform.e
+    x = a.transform.c + (np.arange(cols) + 0.5) * a.transform.a
+    profile = a.data[:, (x > -20) & (x < 20)].mean(axis=1)
+    assert abs(y[np.argmax(np.where(y > 0, profile, 0))] - 4.0) <= 0.5
+    assert abs(y[np.argmax(np.where(y < 0, profile, 0))] + 4.0) <= 0.5
+    assert profile[np.abs(y) < 3].max() < 0.3
+    plain = attractor_map(xyz, line, cell_m=0.5, drop_off_weight=0.0)
+    assert plain.data.max() <= 0.2 + 1e-6 + 0.05
