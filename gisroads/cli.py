@@ -136,6 +136,16 @@ def cmd_blocks(args) -> int:
     return 0
 
 
+def cmd_image(args) -> int:
+    from .jobs import image_job
+    result = image_job(args.input, args.out, nir_band=args.nir_band, red_band=args.red_band,
+                       dsm_path=args.dsm, pixel_m=args.pixel, crs=args.crs,
+                       quicklook=args.quicklook, progress=_ProgressBar(not args.json),
+                       **({"n_segments": args.segments} if args.segments else {}))
+    _print(result, args.json, "\n".join(f"{k}: {v}" for k, v in result.items()))
+    return 0
+
+
 def cmd_snakes(args) -> int:
     from .jobs import snakes_job
     result = snakes_job(args.input, args.map, args.out, curb_detector=args.curb_detector,
@@ -260,6 +270,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-edge", type=_positive, default=80.0,
                    help="longest graph edge in metres (default 80, as in the paper)")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the blocks")
+
+    p = add("image", cmd_image, "extract roads from an aerial image (Grote & Rottensteiner)",
+            "Extract the road network of an aerial image (RGB, CIR or panchromatic GeoTIFF; "
+            "a NIR band and a DSM are used when given): normalized-cut over-segmentation, "
+            "grouping of segments, road-part shape filtering, linking of road parts with an "
+            "integer program over the gaps, junction construction and network significance "
+            "checks. Writes road centre lines with widths (and the cues used), road "
+            "polygons, junctions and the QA layers segments, road_parts, gap_edges and "
+            "junction_connections to a GeoPackage in the image's CRS.")
+    p.add_argument("input", type=Path, help="GeoTIFF (or PNG/JPEG with --pixel and --crs)")
+    p.add_argument("-o", "--out", type=Path, required=True, help="output GeoPackage (.gpkg)")
+    p.add_argument("--nir-band", type=int, help="1-based band number of the near infrared")
+    p.add_argument("--red-band", type=int,
+                   help="1-based band number of the red (default: band 1, or 2 in CIR)")
+    p.add_argument("--dsm", type=Path, help="digital surface model GeoTIFF (metres)")
+    p.add_argument("--segments", type=int,
+                   help="NCut segments (default: one per 300 m² of ground, 50-1500)")
+    p.add_argument("--pixel", type=_positive,
+                   help="pixel size in metres, for an image without georeferencing")
+    p.add_argument("--crs", help="projected CRS for an image without georeferencing, "
+                                 "e.g. EPSG:32633")
+    p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
 
     p = add("snakes", cmd_snakes, "road boundaries along a road map (Boyko & Funkhouser)",
             "Fit the roads of an approximate road map to a LAS/LAZ point cloud: register "

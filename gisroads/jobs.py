@@ -493,6 +493,76 @@ def register_job(cloud_path, map_source, out_path, *, progress: Progress = None,
             "points_read": len(cloud)}
 
 
+def read_image(path, *, pixel_m: float | None = None, crs=None) -> tuple[GeoRaster, object]:
+    """An aerial image in a metre CRS, and the CRS its results go back to.
+
+    A projected GeoTIFF is read as it is; a geographic one (EPSG:4326, as SpaceNet ships) is
+    warped to its UTM zone at its own ground resolution; an image without georeferencing
+    (PNG, JPEG) needs ``pixel_m`` and a projected ``crs``.
+    """
+    from .imagery.datasets import warp_to_utm
+
+    raster = read_raster(path, pixel_size=pixel_m, crs=crs)
+    if raster.crs is None or not raster.crs.is_geographic:
+        return raster, raster.crs
+    rows, cols = raster.shape
+    (west, south, east, north) = raster.bounds
+    lat = np.radians((south + north) / 2.0)
+    metres_per_pixel = np.sqrt((east - west) / cols * 111_320.0 * np.cos(lat)
+                               * (north - south) / rows * 110_540.0)
+    warped, _ = warp_to_utm(path, round(float(metres_per_pixel), 2),
+                            nodata=raster.nodata if raster.nodata is not None else 0)
+    return warped, raster.crs
+
+
+def image_job(image_path, out_path, *, nir_band: int | None = None,
+              red_band: int | None = None, dsm_path=None, pixel_m: float | None = None,
+              crs=None, quicklook=None, progress: Progress = None, **options) -> dict:
+    """Grote & Rottensteiner's road extraction of an aerial image into a GeoPackage.
+
+    Writes ``out_path`` with road_centrelines (width_m, and ``cues``: which of rgb/cir/pan,
+    nir and dsm were used), road_polygons, junctions and the QA layers segments,
+    road_parts, gap_edges and junction_connections, in the image's CRS; optionally a
+    ``quicklook`` PNG. ``options`` go to
+    :func:`gisroads.imagery.pipeline.extract_image_roads`.
+    """
+    from .imagery.pipeline import extract_image_roads
+
+    image, source_crs = read_image(image_path, pixel_m=pixel_m, crs=crs)
+    band_count = image.data.shape[0] if image.data.ndim == 3 else 1
+    for name, band in (("NIR", nir_band), ("red", red_band)):
+        if band is not None and not 1 <= band <= band_count:
+            raise ValueError(f"{image_path}: no {name} band {band} (the image has "
+                             f"{band_count} band(s))")
+    dsm = read_raster(dsm_path) if dsm_path is not None else None
+    roads = extract_image_roads(image, nir_band=nir_band, red_band=red_band, dsm=dsm,
+                                progress=scaled(progress, 0.0, 0.95), **options)
+    network = roads.network
+    if len(network.centrelines) == 0:
+        raise ValueError(f"{image_path}: no road found")
+    layers = network.layers()
+    if source_crs is not None and source_crs != image.crs:
+        layers = {name: frame.to_crs(source_crs) for name, frame in layers.items()}
+    write_geopackage(out_path, layers)
+    result = {"gpkg": Path(out_path), "roads": len(network.centrelines),
+              "length_m": float(network.centrelines.length_m.sum()),
+              "junctions": len(network.junctions), "cues": roads.report["cues"]["cues"],
+              "timings_s": roads.report["timings_s"]}
+    if quicklook is not None:
+        report(progress, 0.97, "drawing the quick-look")
+        write_quicklook(quicklook, [
+            (network.qa["road_parts"], dict(color="orange", linewidth=1, label="road parts")),
+            (network.qa["gap_edges"].query("selected"),
+             dict(color="cyan", linewidth=1.5, label="selected gaps")),
+            (network.centrelines, dict(color="red", linewidth=1.5, label="road centre lines")),
+            (network.junctions, dict(color="yellow", markersize=20, label="junctions")),
+        ], background=image, title=f"{Path(image_path).name}: {result['roads']} roads "
+                                   f"({result['cues']})")
+        result["quicklook"] = Path(quicklook)
+    report(progress, 1.0, "done")
+    return result
+
+
 def _map_lines(map_source) -> gpd.GeoDataFrame:
     """Road map lines from a GeoDataFrame or a line file (a GeoPackage's road_centrelines
     layer when it has one, else its first layer)."""

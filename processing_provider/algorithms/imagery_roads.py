@@ -1,0 +1,85 @@
+"""Imagery road network (Grote & Rottensteiner): the whole pipeline from an aerial image."""
+from qgis.core import (QgsProcessingOutputNumber, QgsProcessingOutputString,
+                       QgsProcessingParameterBand, QgsProcessingParameterFileDestination,
+                       QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer)
+
+from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
+from gisroads.jobs import image_job
+
+from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
+from .base import GisroadsAlgorithm
+
+
+class ImageryRoadNetwork(GisroadsAlgorithm):
+    NAME = "imageryroadnetwork"
+    DISPLAY_NAME = "Imagery road network (Grote & Rottensteiner)"
+    GROUP = "Imagery"
+    HELP = (
+        "<p>Extracts the road network of a high-resolution aerial image following Grote "
+        "&amp; Rottensteiner: a normalized-cut over-segmentation (colour, intervening "
+        "edges and, with a NIR band, an NDVI factor), iterative grouping of segments, road "
+        "parts kept by their shape (elongation, convexity, constant width within the road "
+        "widths, low height and NDVI, no shadow), linking of road parts across gaps by an "
+        "integer program that weighs each gap's geometry and what lies in it (trees, "
+        "buildings, shadow), and junction construction with network significance "
+        "checks.</p>"
+        "<p>Works on RGB, colour-infrared and panchromatic images; a NIR band and a DSM are "
+        "used when given, and the road_centrelines record the cues used. Output: a "
+        "GeoPackage in the image's CRS with road_centrelines (width_m), road_polygons, "
+        "junctions and the QA layers segments (with every shape attribute and the reason a "
+        "segment failed), road_parts, gap_edges and junction_connections. The stage "
+        "algorithms of this group run the same steps one at a time.</p>")
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        params = [
+            (QgsProcessingParameterRasterLayer("INPUT", self.tr("Aerial image")),
+             "RGB, CIR or panchromatic image in a projected CRS (metres); a geographic "
+             "image is warped to its UTM zone"),
+            (QgsProcessingParameterBand("NIR_BAND", self.tr("Near-infrared band"), None,
+                                        "INPUT", optional=True),
+             "optional: the NIR band; enables NDVI in the segmentation, the road-part test "
+             "and the gap context"),
+            (QgsProcessingParameterBand("RED_BAND", self.tr("Red band"), None, "INPUT",
+                                        optional=True),
+             "optional, with a NIR band: the red band for NDVI (default band 1, or 2 in a "
+             "three-band CIR image)"),
+            (QgsProcessingParameterRasterLayer("DSM", self.tr("Surface model (DSM)"),
+                                               optional=True),
+             "optional: heights in metres; enables the height criteria and buildings as "
+             "gap context"),
+            (QgsProcessingParameterNumber("SEGMENTS", self.tr("NCut segments"),
+                                          QgsProcessingParameterNumber.Integer, None,
+                                          optional=True, minValue=10, maxValue=5000),
+             "empty: one segment per 300 m² of ground (50-1500)"),
+            (QgsProcessingParameterFileDestination("OUTPUT", self.tr("Road network"),
+                                                   "GeoPackage (*.gpkg)"),
+             "GeoPackage receiving every layer, in the image's CRS"),
+        ]
+        for param, text in params:
+            param.setHelp(self.tr(text))
+            self.addParameter(param)
+        for name, text in (("ROADS", "number of roads"), ("LENGTH_M", "total road length"),
+                           ("JUNCTIONS", "number of junctions")):
+            self.addOutput(QgsProcessingOutputNumber(name, self.tr(text)))
+        self.addOutput(QgsProcessingOutputString("CUES", self.tr("Cues used")))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
+        dsm = self.parameterAsRasterLayer(parameters, "DSM", context)
+        options = {}
+        if parameters.get("SEGMENTS") not in (None, ""):
+            options["n_segments"] = self.parameterAsInt(parameters, "SEGMENTS", context)
+        with gisroads_errors():
+            result = image_job(
+                self.parameterAsRasterLayer(parameters, "INPUT", context).source(), out,
+                nir_band=self.parameterAsInt(parameters, "NIR_BAND", context) or None,
+                red_band=self.parameterAsInt(parameters, "RED_BAND", context) or None,
+                dsm_path=dsm.source() if dsm is not None else None,
+                progress=progress_callback(feedback), **options)
+        load_geopackage_on_completion(context, out, (
+            "segments", "road_parts", "gap_edges", "junction_connections", POLYGONS,
+            CENTRELINES, JUNCTIONS), group="roads")
+        feedback.pushInfo(f"{result['roads']} roads, {result['length_m']:.0f} m, "
+                          f"{result['junctions']} junctions; cues: {result['cues']}")
+        return {"OUTPUT": out, "ROADS": result["roads"], "LENGTH_M": result["length_m"],
+                "JUNCTIONS": result["junctions"], "CUES": result["cues"]}

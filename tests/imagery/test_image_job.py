@@ -1,0 +1,53 @@
+"""`gisroads image` as a user runs it, and the image reader behind it."""
+import json
+import subprocess
+import sys
+
+import pytest
+
+from gisroads.io.vector import list_layers, read_layer
+from gisroads.jobs import read_image
+from gisroads.synthetic import make_scene
+from gisroads.synthetic.image import write_image
+
+
+def gisroads(*args):
+    return subprocess.run([sys.executable, "-m", "gisroads.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def image_files(tmp_path_factory):
+    out = tmp_path_factory.mktemp("image_job")
+    write_image(make_scene(seed=1, size_m=(300.0, 300.0)), out / "image.tif", out / "dsm.tif",
+                pixel_m=0.5)
+    return out
+
+
+def test_image_command_writes_every_layer_with_the_cues_used(image_files, tmp_path):
+    result = gisroads("image", image_files / "image.tif", "-o", tmp_path / "roads.gpkg",
+                      "--nir-band", 4, "--dsm", image_files / "dsm.tif",
+                      "--quicklook", tmp_path / "roads.png", "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["roads"] > 3 and report["cues"] == "rgb+nir+dsm"
+    assert list_layers(tmp_path / "roads.gpkg") == [
+        "road_centrelines", "road_polygons", "junctions", "segments", "road_parts",
+        "gap_edges", "junction_connections"]
+    lines = read_layer(tmp_path / "roads.gpkg", "road_centrelines")
+    assert (lines.cues == "rgb+nir+dsm").all() and lines.crs.to_epsg() == 32633
+    assert (tmp_path / "roads.png").stat().st_size > 10_000
+
+
+def test_a_band_the_image_lacks_is_an_input_error(image_files, tmp_path):
+    result = gisroads("image", image_files / "image.tif", "-o", tmp_path / "r.gpkg",
+                      "--nir-band", 7)
+    assert result.returncode == 2 and "no NIR band 7" in result.stderr
+    assert result.stdout == "" and not (tmp_path / "r.gpkg").exists()
+
+
+def test_a_geographic_image_is_read_in_its_utm_zone(shared_data):
+    image, source_crs = read_image(shared_data / "imagery/spacenet/RGB-PanSharpen_img1447.tif")
+    assert source_crs.to_epsg() == 4326
+    assert image.crs.to_epsg() == 32631  # Paris: UTM 31N
+    assert 0.2 <= image.pixel_size <= 0.3  # 0.2 m east-west, 0.3 m north-south pixels

@@ -1,0 +1,23 @@
+"""The whole imagery pipeline through qgis_process: the plugin's algorithm, the image's cues."""
+from gisroads.evaluate import buffer_metrics
+from gisroads.io.vector import list_layers, read_layer
+
+
+def test_imagery_road_network_uses_nir_and_dsm(qgis_process, scene_dir, tmp_path):
+    result = qgis_process.run("imageryroadnetwork", INPUT=scene_dir / "image.tif", NIR_BAND=4,
+                              DSM=scene_dir / "dsm.tif", OUTPUT=tmp_path / "roads.gpkg")
+    assert result["CUES"] == "rgb+nir+dsm" and result["ROADS"] > 0
+    assert list_layers(tmp_path / "roads.gpkg")[:4] == ["road_centrelines", "road_polygons",
+                                                        "junctions", "segments"]
+    lines = read_layer(tmp_path / "roads.gpkg", "road_centrelines")
+    truth = read_layer(scene_dir / "truth.gpkg", "road_centrelines")
+    # 1 m pixels: a 9 m street is 9 pixels across
+    assert buffer_metrics(lines, truth, buffer_m=3.0).correctness > 0.5
+
+
+def test_imagery_band_the_image_lacks_fails_cleanly(qgis_process, scene_dir, tmp_path):
+    result = qgis_process("run", "gisroads:imageryroadnetwork", "--",
+                          f"INPUT={scene_dir / 'dsm.tif'}", "NIR_BAND=1", "RED_BAND=3",
+                          f"OUTPUT={tmp_path / 'r.gpkg'}", check=False)
+    assert result.returncode == 1 and "no red band 3" in result.stdout + result.stderr
+    assert not (tmp_path / "r.gpkg").exists()
