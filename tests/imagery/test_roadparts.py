@@ -124,6 +124,7 @@ def test_grass_strip_fails_on_ndvi_or_excess_green_and_passes_without_colour():
     assert _row(rgb.segments, 0).excess_green == pytest.approx(0.0, abs=0.02)  # asphalt
     # without NIR and colour (or the RGB test loosened) nothing tells grass from asphalt
     grey = np.round(image.data[:3].mean(axis=0)).astype(np.uint8)  # 81 against 88
+    grey[:60, :60], grey[-60:, -60:] = 220, 20  # a white roof and a shadow set the stretch
     pan = extract_road_parts(labels, GeoRaster(grey, T, CRS))
     assert _row(pan.segments, 1).passed and pan.cues["cues"] == "pan"
     assert np.isnan(_row(pan.segments, 1).excess_green)
