@@ -275,6 +275,56 @@ def boundary_strength(features: RotatedFeatures, r0, c0, width_px, length_px, *,
     return np.minimum(near_side, far_side)
 
 
+def _side_contrast(features: RotatedFeatures, line_row, c0, c1, band, outward) -> np.ndarray:
+    """Mean intensity in the band of ``band`` rows outside a window side minus that in the
+    band inside it; the side lies between rows ``line_row - 1`` and ``line_row`` and the
+    outside is above it (``outward = -1``) or below it (``outward = +1``)."""
+    above = _band_mean(features, line_row - band, line_row, c0, c1)
+    below = _band_mean(features, line_row, line_row + band, c0, c1)
+    return np.where(outward < 0, above - below, below - above)
+
+
+def sides_on_strongest_edges(features: RotatedFeatures, r0, c0, width_px, length_px, *,
+                             edge_band_px, slack_px, ratio: float = 0.5) -> np.ndarray:
+    """Whether the long sides of windows are the road's edges: no line inside a window
+    steps from bright to dark as strongly as its sides do.
+
+    The step at a line is the contrast of Eq. (1) with a thin band of ``edge_band_px``
+    rows (mean outside minus mean inside, for a side's polarity); a side's step is the
+    greatest within ``slack_px`` rows of it. A window fails when a line inside it, more
+    than ``slack_px`` rows from its sides, over its columns, has a step of either side's
+    polarity above ``ratio`` times that side's step. A window as wide as
+    the road and its sidewalks has its sides on the sidewalk-grass line and the kerbs, a
+    stronger step, inside; one over both carriageways of a dual road and their median
+    has the median's edges inside; both fail. A window on the kerbs, or a little inside
+    them (the sampled widths are a few metres apart), passes: only lane markings and noise
+    step inside it.
+
+    Returns
+    -------
+    ndarray of bool
+    """
+    r0, c0 = np.broadcast_arrays(*(np.asarray(a) for a in (r0, c0)))
+    width_px = np.broadcast_to(np.asarray(width_px), r0.shape)
+    c1 = c0 + np.asarray(length_px)
+    # a side's step is the greatest within the slack of it: the sampled width may put the
+    # far side up to a metre or two off the kerb
+    near = np.max([_side_contrast(features, r0 + k, c0, c1, edge_band_px, -1)
+                   for k in range(-slack_px, slack_px + 1)], axis=0)
+    far = np.max([_side_contrast(features, r0 + width_px + k, c0, c1, edge_band_px, 1)
+                  for k in range(-slack_px, slack_px + 1)], axis=0)
+    ok = np.ones(r0.shape, dtype=bool)
+    for offset in range(slack_px + 1, int(width_px.max(initial=0)) - slack_px):
+        inner = offset < width_px - slack_px
+        at = np.flatnonzero(inner & ok)
+        if len(at) == 0:
+            continue
+        line = r0[at] + offset
+        down = _side_contrast(features, line, c0[at], c1[at], edge_band_px, -1)
+        ok[at] = ~((down > ratio * near[at]) | (-down > ratio * far[at]))
+    return ok
+
+
 def valid_fraction(features: RotatedFeatures, r0, c0, width_px, length_px) -> np.ndarray:
     """Share of each window's cells (inside the rotated frame or not) that hold data."""
     area = np.asarray(width_px) * np.asarray(length_px)

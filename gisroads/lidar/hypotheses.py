@@ -8,6 +8,16 @@ of one orientation at once on integral images of the rotated image. Windows with
 ``S_bd >= t_bd`` and ``S_int >= t_int`` are valid; each votes ``beta_bd S_bd + beta_int
 S_int`` on the pixels it covers, one likelihood map per width, capped at ``l_max`` (Eq. 5).
 
+Width selection. The paper selects a road's width by the competition of the per-width
+maps in the minimum cover (Fig. 3, case 3), which needs L_k higher at the right width. With
+means over 4 m bands a window 2-4 m too wide, its sides on the sidewalk-grass line, passes
+T_bd as well as the right one and both maps saturate at L_max, so the cover took the wider
+(more seeds per fixed cost A): 16 and 25 m rectangles on 9 and 21 m roads, and one 25 m
+rectangle over both carriageways of a dual road. A valid window must therefore also have
+its sides on the road's edges: no line inside it may step from bright to dark half as much
+as its sides (:func:`gisroads.features.rectangles.sides_on_strongest_edges`, the boundary
+filter of Eq. 1 used as an edge detector with non-maximum suppression across the window).
+
 The paper gives no thresholds, band width or cap. The defaults were chosen on the ground
 intensity of synthetic scenes (:mod:`gisroads.synthetic`, 300-400 m, 10 pulses/m2) and
 checked on the real suburb tile ``fusa.laz``, with the default sampling (corners every 2 m,
@@ -27,7 +37,7 @@ from scipy import ndimage
 from ..features.edges import dominant_orientations
 from ..features.rectangles import (THETA2_RAD, boundary_strength, compose,
                                    interior_strength, rotate_to, rotated_features,
-                                   rotated_frame, valid_fraction)
+                                   rotated_frame, sides_on_strongest_edges, valid_fraction)
 from ..geo import GeoRaster
 from ..progress import Progress, report
 from ..segmentation.ncut import segment_boundaries
@@ -54,6 +64,20 @@ both fusa and a synthetic scene (see the minimum-cover module)."""
 BAND_M = 4.0
 """Band width w1 of the boundary filter, Eq. (1), metres: wide enough to reach past a
 kerb-side strip of parked cars, tree shadow or sidewalk to the bright verge."""
+EDGE_BAND_M = 1.0
+"""Band of the thin step filter that checks where a window's sides lie, metres: the
+sidewalk-grass line and the kerb 2 m inside it are separate steps."""
+EDGE_RATIO = 0.5
+"""A line inside a valid window steps at most half as much as its sides (lane markings do
+a tenth to a fifth; a sidewalk's kerb or a median's edge as much as the sides)."""
+EDGE_SLACK_M = 1.0
+"""Steps within this distance of a side are the side's (widths are sampled metres apart)."""
+OVERHANG_M = 20.0
+"""Farthest a window's centre line may reach off the image, metres: half the shortest
+window; a 300 m window reaching 110 m off was valid on its part inside, 2 degrees off
+the road."""
+"""A window's side must be the strongest step within this distance (metres), a sidewalk's
+width and a bit: 0 turns the check off."""
 FAN_RAD = tuple(np.radians((-2.0, 0.0, 2.0)))
 """Offsets tried around each dominant orientation: roads a few degrees apart share one
 histogram peak, and a rigid 150 m window 2 degrees off drifts 5 m across its road."""
@@ -150,6 +174,25 @@ def _windows(line_row, col, width_px, length_px) -> tuple[np.ndarray, ...]:
     return r0[first], c0[first], w_index[first], l_index[first]
 
 
+def _centre_line_inside(to_image: Affine, shape, r0, c0, width_px, length_px, *,
+                        overhang_px: float) -> np.ndarray:
+    """Whether both ends of rotated windows' centre lines lie within ``overhang_px`` of the
+    image.
+
+    Windows may hold up to half their cells without data (trees, cars), but one reaching
+    far off the image would be judged on the part inside alone: a long window a degree or
+    two off a road's direction drifts across it beyond the border unseen.
+    """
+    row = np.asarray(r0) + np.asarray(width_px) / 2.0
+    ok = np.ones(row.shape, dtype=bool)
+    for col in (np.asarray(c0), np.asarray(c0) + np.asarray(length_px)):
+        x = to_image.a * col + to_image.b * row + to_image.c
+        y = to_image.d * col + to_image.e * row + to_image.f
+        ok &= ((x >= -overhang_px) & (x <= shape[1] + overhang_px)
+               & (y >= -overhang_px) & (y <= shape[0] + overhang_px))
+    return ok
+
+
 def _rectangles_on_map(to_map, r0, c0, width_px, length_px):
     """Map polygons of rotated windows and the map coordinates of their first corner.
 
@@ -187,6 +230,8 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
                     orientations_rad=None, fan_rad=FAN_RAD, corner_step_m: float = CORNER_STEP_M,
                     straight_m: float = STRAIGHT_M, t_bd: float = T_BD, t_int: float = T_INT,
                     theta2_rad: float = THETA2_RAD, band_m: float = BAND_M,
+                    edge_band_m: float = EDGE_BAND_M, edge_ratio: float = EDGE_RATIO,
+                    edge_slack_m: float = EDGE_SLACK_M, overhang_m: float = OVERHANG_M,
                     min_valid_fraction: float = 0.5, beta_bd: float = 1.0,
                     beta_int: float = 1.0, max_hypotheses: int | None = 200_000,
                     progress: Progress = None) -> gpd.GeoDataFrame:
@@ -224,6 +269,15 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
         Orientation tolerance of Eq. (3), 15 degrees.
     band_m : float
         Band width w1 of Eq. (1) (capped at half the window width).
+    edge_band_m, edge_ratio, edge_slack_m : float
+        The check that a window's sides are the road's edges
+        (:func:`gisroads.features.rectangles.sides_on_strongest_edges`): thin band of the
+        step filter, greatest share of a side's step allowed inside the window, and how
+        far from a side a step counts as the side's (metres); ``edge_ratio = 0`` turns it
+        off (:data:`EDGE_BAND_M`, :data:`EDGE_RATIO`, :data:`EDGE_SLACK_M`).
+    overhang_m : float
+        How far the ends of a window's centre line may lie off the image, metres
+        (:data:`OVERHANG_M`).
     min_valid_fraction : float
         Least share of a window's cells holding data (cells off the image hold none). Half:
         cars parked at the kerb and trees leave 30-40 % of the cells along a road empty in
@@ -259,6 +313,8 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
     if width_px.min(initial=2) < 2 or length_px.min(initial=1) < 1:
         raise ValueError("windows must be at least 2 pixels wide and 1 pixel long")
     band_px = max(int(round(band_m / cell_m)), 1)
+    edge_band_px = max(int(round(edge_band_m / cell_m)), 1)
+    edge_slack_px = max(int(round(edge_slack_m / cell_m)), 1)
     step_px = max(int(round(corner_step_m / cell_m)), 1)
     straight_px = max(int(round(straight_m / cell_m)), 3)
     if orientations_rad is None:
@@ -285,8 +341,16 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
         r0, c0, w_index, l_index, s_bd = (a[keep] for a in (r0, c0, w_index, l_index, s_bd))
         w, length = width_px[w_index], length_px[l_index]
         s_int = interior_strength(features, r0, c0, w, length)
-        keep = np.flatnonzero((s_int >= t_int) & (
-            valid_fraction(features, r0, c0, w, length) >= min_valid_fraction))
+        keep = (s_int >= t_int) & (valid_fraction(features, r0, c0, w, length)
+                                   >= min_valid_fraction)
+        keep &= _centre_line_inside(features.to_image, intensity.shape, r0, c0, w, length,
+                                    overhang_px=overhang_m / cell_m)
+        if edge_ratio > 0:
+            at = np.flatnonzero(keep)
+            keep[at] = sides_on_strongest_edges(
+                features, r0[at], c0[at], w[at], length[at], edge_band_px=edge_band_px,
+                slack_px=edge_slack_px, ratio=edge_ratio)
+        keep = np.flatnonzero(keep)
         found.append(np.stack([r0[keep], c0[keep], w_index[keep], l_index[keep],
                                np.full(len(keep), index), s_bd[keep], s_int[keep]], axis=1))
         to_map.append(compose(image.transform, features.to_image))

@@ -62,7 +62,8 @@ def ground_and_intensity(cloud: PointCloud, planes: GroundPlanes, *, bounds, cel
     grid_bounds = (transform.c, transform.f - shape[0] * cell_m,
                    transform.c + shape[1] * cell_m, transform.f)
     images = intensity_images(cloud.xyz, cloud.intensity, planes.level, cell_m=cell_m,
-                              bounds=grid_bounds, crs=cloud.crs)
+                              bounds=grid_bounds, crs=cloud.crs,
+                              single_return=cloud.number_of_returns <= 1)
     heights = level_heights(cloud.xyz, planes.level, planes.n_levels, transform=transform,
                             shape=shape, crs=cloud.crs)
     return images, heights
