@@ -49,7 +49,7 @@ from ..geo import GeoRaster
 from ..progress import report
 from ..segmentation.ncut import (_typical, intervening_edge_strength, ncut_segmentation,
                                  superpixel_graph)
-from .cues import intensity, ndvi, scale_bands, valid_mask
+from .cues import _visible_mean, ndvi, scale_bands, valid_mask
 from .roadparts import _polygons, rasterize_segments
 
 PAPER_PIXEL_M = 0.1
@@ -129,6 +129,27 @@ def ndvi_affinity(adjacency, superpixel_ndvi: np.ndarray, *,
                              shape=adjacency.shape)
 
 
+def edge_strength(image: GeoRaster, *, nir_band: int | None = None,
+                  bands: np.ndarray | None = None) -> np.ndarray:
+    """Edge magnitude of an image for the segmentation and grouping stages: the local energy
+    (:func:`gisroads.features.edges.local_energy`) of its intensity, the mean of the
+    stretched bands without the NIR band (:func:`gisroads.imagery.cues.intensity`).
+
+    ``bands``: the image's :func:`~gisroads.imagery.cues.scale_bands`, when already at hand.
+    """
+    if bands is None:
+        bands = scale_bands(image)
+    return local_energy(_visible_mean(bands, nir_band))[0]
+
+
+def _checked_edges(edge_magnitude, shape) -> np.ndarray:
+    edges = np.asarray(edge_magnitude, dtype=float)
+    if edges.shape != tuple(shape):
+        raise ValueError(f"edge_magnitude {edges.shape} and image {tuple(shape)} differ in "
+                         "shape")
+    return edges
+
+
 def _patches(centroid: np.ndarray, shape: tuple[int, int], n_patches: int) -> np.ndarray:
     """Patch index of every superpixel: a grid of about ``n_patches`` square cells."""
     rows, cols = shape
@@ -142,7 +163,8 @@ def _patches(centroid: np.ndarray, shape: tuple[int, int], n_patches: int) -> np
 def segment_image(image: GeoRaster, *, nir_band: int | None = None,
                   red_band: int | None = None, n_segments: int | None = None,
                   n_superpixels: int | None = None, ndvi_threshold: float = NDVI_THRESHOLD,
-                  w_ndvi: float = W_NDVI, seed: int = 0, progress=None) -> np.ndarray:
+                  w_ndvi: float = W_NDVI, edge_magnitude=None, seed: int = 0,
+                  progress=None) -> np.ndarray:
     """Over-segment an aerial image by normalized cuts (paper section 2.1.1).
 
     Colour similarity uses every band of the image stretched to [0, 1]
@@ -174,6 +196,9 @@ def segment_image(image: GeoRaster, *, nir_band: int | None = None,
         NDVI separating vegetation from the rest (used with ``nir_band`` only).
     w_ndvi : float
         ``0 < w_NDVI << 1``, the factor across the threshold (1 disables it).
+    edge_magnitude : array_like, shape (rows, cols), optional
+        Edge strength for the intervening-edge term; default: :func:`edge_strength` (pass
+        it to share one computation with :func:`gisroads.segmentation.grouping.group_segments`).
     seed : int
         Seed of the eigensolver and discretisation: same seed, same segments.
     progress : callable, optional
@@ -204,7 +229,8 @@ def segment_image(image: GeoRaster, *, nir_band: int | None = None,
         raise ValueError(f"w_ndvi must lie in (0, 1], got {w_ndvi}")
     report(progress, 0.0, "edges")
     bands = scale_bands(image)
-    edges, _ = local_energy(intensity(image, nir_band=nir_band))
+    edges = (edge_strength(image, nir_band=nir_band, bands=bands) if edge_magnitude is None
+             else _checked_edges(edge_magnitude, image.shape))
     vegetation_index = None if nir_band is None else ndvi(image, nir_band, red_band)
     report(progress, 0.15, "superpixels")
     superpixels, adjacency, features = superpixel_graph(bands, n_superpixels=n_superpixels,

@@ -44,10 +44,9 @@ from scipy.sparse.csgraph import connected_components
 from skimage.measure import label as connected_regions
 from skimage.morphology import skeletonize
 
-from ..features.edges import local_energy
 from ..geo import GeoRaster
-from ..imagery.cues import intensity, ndvi as compute_ndvi, resample_to, scale_bands
-from ..imagery.segments import pixel_size_m
+from ..imagery.cues import ndvi as compute_ndvi, resample_to, scale_bands
+from ..imagery.segments import edge_strength, pixel_size_m
 from ..progress import report
 from .ncut import _typical
 
@@ -316,7 +315,7 @@ def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, nd
                    nir_band: int | None = None, merge_fraction: float = 0.1,
                    max_iterations: int = 200, criteria: dict | None = None,
                    split_branches: bool = True, min_branch_m: float = MIN_BRANCH_M,
-                   progress=None) -> np.ndarray:
+                   edge_magnitude=None, progress=None) -> np.ndarray:
     """Merge adjacent segments iteratively with the paper's criteria and fuzzy rules.
 
     Parameters
@@ -346,6 +345,9 @@ def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, nd
         Run :func:`split_branching_segments` on the result.
     min_branch_m : float
         See :func:`split_branching_segments`.
+    edge_magnitude : array_like, shape (rows, cols), optional
+        Edge strength on the image grid; default:
+        :func:`gisroads.imagery.segments.edge_strength`, as the segmentation uses.
     progress : callable, optional
         ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
 
@@ -384,8 +386,13 @@ def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, nd
             raise ValueError(f"ndvi {ndvi.shape} and image {labels.shape} differ in shape")
     grouped = compact
     if n >= 2:
-        state = _State(compact, scale_bands(image),
-                       local_energy(intensity(image, nir_band=nir_band))[0],
+        bands = scale_bands(image)
+        edges = (edge_strength(image, nir_band=nir_band, bands=bands)
+                 if edge_magnitude is None else np.asarray(edge_magnitude, dtype=float))
+        if edges.shape != labels.shape:
+            raise ValueError(f"edge_magnitude {edges.shape} and image {labels.shape} differ "
+                             "in shape")
+        state = _State(compact, bands, edges,
                        None if dsm is None else resample_to(dsm, image), ndvi, n)
         _merge_iteratively(state, limits, pixel_m, merge_fraction, max_iterations, progress)
         grouped = np.where(compact >= 0, state.roots()[np.maximum(compact, 0)], -1)

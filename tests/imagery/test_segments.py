@@ -11,8 +11,8 @@ from scipy.sparse import csr_matrix
 
 from gisroads.geo import GeoRaster
 from gisroads.imagery.datasets import ETH_PIXEL_M, LOCAL_CRS
-from gisroads.imagery.segments import (default_counts, frame_to_labels, ndvi_affinity,
-                                       segment_image, segments_to_frame)
+from gisroads.imagery.segments import (default_counts, edge_strength, frame_to_labels,
+                                       ndvi_affinity, segment_image, segments_to_frame)
 from gisroads.io.raster import read_raster
 from gisroads.progress import Cancelled
 from gisroads.segmentation.ncut import segment_boundaries
@@ -96,6 +96,17 @@ def test_the_ndvi_factor_separates_verge_from_road_of_equal_brightness():
     without = straddling_share(segment_image(image, w_ndvi=1.0, **options), verge)
     with_ndvi = straddling_share(segment_image(image, **options), verge)
     assert with_ndvi < 0.01 and without > 4 * with_ndvi
+
+
+def test_a_shared_edge_image_gives_the_same_segments():
+    data, _ = road_strip_image(bands=4)
+    image = raster(data.astype(np.float32))
+    edges = edge_strength(image, nir_band=4)
+    assert edges.shape == image.shape and edges[78:82, 50].max() > 2 * np.median(edges)  # road edge
+    assert np.array_equal(segment_image(image, nir_band=4, n_segments=20, edge_magnitude=edges),
+                          segment_image(image, nir_band=4, n_segments=20))
+    with pytest.raises(ValueError, match="edge_magnitude"):
+        segment_image(image, edge_magnitude=edges[:10])
 
 
 def test_ndvi_affinity_marks_only_pairs_across_the_threshold():

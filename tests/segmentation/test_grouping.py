@@ -164,6 +164,8 @@ def test_bad_input_is_refused():
         group_segments(labels, image, merge_fraction=0)
     with pytest.raises(ValueError, match="unknown criterion"):
         group_segments(labels, image, criteria={"shape": (0, 1)})
+    with pytest.raises(ValueError, match="edge_magnitude"):
+        group_segments(labels, image, edge_magnitude=np.zeros((5, 5)))
     with pytest.raises(ValueError, match="integer"):
         group_segments(labels.astype(float), image)
     assert set(CRITERIA) == {"colour", "edge", "convexity", "border_m", "border_rel",
