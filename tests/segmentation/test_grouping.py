@@ -11,6 +11,7 @@ from gisroads.geo import GeoRaster
 from gisroads.imagery.datasets import ETH_PIXEL_M, LOCAL_CRS
 from gisroads.imagery.segments import segment_image
 from gisroads.io.raster import read_raster
+from gisroads.progress import Cancelled
 from gisroads.segmentation.grouping import (CRITERIA, group_segments, merge_strength,
                                             split_branching_segments)
 from gisroads.synthetic import make_scene, render_image
@@ -168,6 +169,12 @@ def test_bad_input_is_refused():
         group_segments(labels, image, edge_magnitude=np.zeros((5, 5)))
     with pytest.raises(ValueError, match="integer"):
         group_segments(labels.astype(float), image)
+
+    def cancel(fraction, message):
+        if "iteration" in message:
+            raise Cancelled
+    with pytest.raises(Cancelled):
+        group_segments(labels, image, progress=cancel)
     assert set(CRITERIA) == {"colour", "edge", "convexity", "border_m", "border_rel",
                              "height_m", "ndvi"}
 
