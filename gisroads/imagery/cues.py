@@ -106,10 +106,12 @@ def intensity(image: GeoRaster, *, nir_band: int | None = None,
     -------
     ndarray of float32, shape ``(rows, cols)``; NaN where the image has no data.
     """
-    return _visible_mean(scale_bands(image, percentiles=percentiles), nir_band)
+    return visible_mean(scale_bands(image, percentiles=percentiles), nir_band)
 
 
-def _visible_mean(scaled: np.ndarray, nir_band: int | None) -> np.ndarray:
+def visible_mean(scaled: np.ndarray, nir_band: int | None) -> np.ndarray:
+    """Mean of the scaled bands other than the NIR band (1-based ``nir_band``): the
+    brightness of a visible or panchromatic image."""
     keep = np.ones(len(scaled), bool)
     if nir_band is not None:
         keep[_check_band(nir_band, len(scaled), "NIR") - 1] = False
@@ -385,7 +387,7 @@ def image_cues(image: GeoRaster, *, nir_band: int | None = None,
     bands = scale_bands(image, percentiles=percentiles)
     kind = image_kind(len(bands), nir_band)
     return ImageCues(
-        bands=bands, intensity=_visible_mean(bands, nir_band),
+        bands=bands, intensity=visible_mean(bands, nir_band),
         ndvi=None if nir_band is None else ndvi(image, nir_band, red_band),
         ndsm=None if dsm is None else normalised_dsm(dsm, image, window_m=ground_window_m),
         kind=kind, nir_band=nir_band,

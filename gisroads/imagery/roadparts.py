@@ -48,6 +48,7 @@ from skimage.morphology import skeletonize
 
 from ..geo import GeoRaster
 from ..progress import Progress, report, scaled
+from ..vectorize.regions import segment_polygons
 from .cues import ImageCues, image_cues
 
 MAX_WIDTH_M = 40.0
@@ -136,36 +137,6 @@ def _last_per_group(groups: np.ndarray, keys: np.ndarray) -> np.ndarray:
     order = np.lexsort((keys, groups))
     last = np.r_[groups[order][1:] != groups[order][:-1], True]
     return order[last]
-
-
-def _polygons(compact: np.ndarray, n: int, transform: Affine) -> np.ndarray:
-    """One (Multi)Polygon per segment from the pixel outlines."""
-    rings, owner, ring_polygon = [], [], []
-    for index, (geometry, value) in enumerate(rasterio.features.shapes(
-            compact, mask=compact >= 0, transform=transform, connectivity=4)):
-        rings += geometry["coordinates"]  # the shell, then the holes
-        ring_polygon += [index] * len(geometry["coordinates"])
-        owner.append(int(value))
-    # built in two vectorised calls: shapely.geometry.shape() per polygon costs more than
-    # the tracing
-    sizes = [len(ring) for ring in rings]
-    ring_of = np.repeat(np.arange(len(rings)), sizes)
-    rings = shapely.linearrings(np.concatenate(rings) if rings else np.empty((0, 2)),
-                                indices=ring_of)
-    parts = shapely.polygons(rings, indices=ring_polygon) if len(rings) else \
-        np.empty(0, dtype=object)
-    owner = np.array(owner, dtype=np.int64)
-    order = np.argsort(owner, kind="stable")
-    parts, owner = parts[order], owner[order]
-    counts = np.bincount(owner, minlength=n)
-    out = np.empty(n, dtype=object)
-    single = counts[owner] == 1
-    out[owner[single]] = parts[single]
-    if (~single).any():
-        multi = np.unique(owner[~single])
-        out[multi] = shapely.multipolygons(parts[~single],
-                                           indices=np.searchsorted(multi, owner[~single]))
-    return out
 
 
 def _interior(compact: np.ndarray) -> np.ndarray:
@@ -311,7 +282,7 @@ def _measure(labels: np.ndarray, cues: ImageCues, transform: Affine, crs,
     frame = {"segment_id": ids.astype(np.int64), "area_m2": count * pixel_m ** 2}
 
     report(progress, 0.05, "segment outlines")
-    polygons = _polygons(compact, n, transform)
+    polygons = segment_polygons(compact, n, transform)
     # the pixel staircase would overstate oblique and curved borders: simplify by a pixel
     perimeter = shapely.length(shapely.simplify(polygons, pixel_m, preserve_topology=False))
     hull = shapely.area(shapely.convex_hull(polygons))

@@ -47,10 +47,11 @@ from skimage.measure import label as connected_regions
 from ..features.edges import local_energy
 from ..geo import GeoRaster
 from ..progress import report
-from ..segmentation.ncut import (_typical, intervening_edge_strength, ncut_segmentation,
-                                 superpixel_graph)
-from .cues import _visible_mean, ndvi, scale_bands, valid_mask
-from .roadparts import _polygons, rasterize_segments
+from ..segmentation.ncut import (intervening_edge_strength, ncut_segmentation,
+                                 superpixel_graph, typical_scale)
+from ..vectorize.regions import segment_polygons
+from .cues import ndvi, scale_bands, valid_mask, visible_mean
+from .roadparts import rasterize_segments
 
 PAPER_PIXEL_M = 0.1
 """Ground sampling distance of the paper's images (Grangemouth 10 cm, Vaihingen 8 cm)."""
@@ -139,7 +140,7 @@ def edge_strength(image: GeoRaster, *, nir_band: int | None = None,
     """
     if bands is None:
         bands = scale_bands(image)
-    return local_energy(_visible_mean(bands, nir_band))[0]
+    return local_energy(visible_mean(bands, nir_band))[0]
 
 
 def _checked_edges(edge_magnitude, shape) -> np.ndarray:
@@ -242,8 +243,8 @@ def segment_image(image: GeoRaster, *, nir_band: int | None = None,
     # every patch weighs colour and edges alike
     pairs = sparse.triu(adjacency, k=1).tocoo()
     mean = features["mean"].reshape(n_nodes, -1)
-    sigma_intensity = _typical(np.linalg.norm(mean[pairs.row] - mean[pairs.col], axis=1))
-    sigma_edge = _typical(sparse.triu(intervening_edge_strength(superpixels, adjacency,
+    sigma_intensity = typical_scale(np.linalg.norm(mean[pairs.row] - mean[pairs.col], axis=1))
+    sigma_edge = typical_scale(sparse.triu(intervening_edge_strength(superpixels, adjacency,
                                                                 edges), k=1).tocoo().data)
     extra = None
     if vegetation_index is not None and w_ndvi < 1:
@@ -305,7 +306,7 @@ def segments_to_frame(labels, raster: GeoRaster) -> gpd.GeoDataFrame:
     present = np.unique(labels[labels >= 0])
     compact = np.full(labels.shape, -1, np.int32)
     compact[labels >= 0] = np.searchsorted(present, labels[labels >= 0])
-    polygons = _polygons(compact, len(present), raster.transform) if len(present) else []
+    polygons = segment_polygons(compact, len(present), raster.transform) if len(present) else []
     area = np.bincount(compact[compact >= 0], minlength=len(present))
     return gpd.GeoDataFrame({"segment_id": present.astype(np.int64),
                              "area_px": area.astype(np.int64)},

@@ -48,7 +48,7 @@ from ..geo import GeoRaster
 from ..imagery.cues import ndvi as compute_ndvi, resample_to, scale_bands
 from ..imagery.segments import edge_strength, pixel_size_m
 from ..progress import report
-from .ncut import _typical
+from .ncut import typical_scale
 
 HISTOGRAM_BINS = 16
 """Bins per band over the stretched [0, 1] range; values are shared linearly between the
@@ -181,7 +181,7 @@ class _State:
         flat = labels.ravel()
         a, b = flat[first], flat[second]
         across = np.maximum(edges.ravel()[first], edges.ravel()[second])
-        self.edge_scale = _typical(across)
+        self.edge_scale = typical_scale(across)
         self._set_pairs(np.minimum(a, b), np.maximum(a, b), np.ones(len(a)), across,
                         changed=np.ones(n, bool))
 

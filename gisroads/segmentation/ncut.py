@@ -213,8 +213,9 @@ def _robust_std(values: np.ndarray) -> float:
     return mad if mad > 0 else (float(values.std()) or 1.0)
 
 
-def _typical(values: np.ndarray) -> float:
-    """Median of ``values`` (>= 0); of the positive ones if that is 0; 1 if there are none."""
+def typical_scale(values: np.ndarray) -> float:
+    """A scale for affinities ``exp(-d^2 / sigma^2)``: the median of ``values`` (>= 0); of
+    the positive ones if that is 0; 1 if there are none."""
     median = float(np.median(values)) if values.size else 0.0
     if median > 0:
         return median
@@ -514,7 +515,7 @@ def ncut_segmentation(image, *, n_segments: int = 150, n_superpixels: int = 3000
 
     difference = np.sqrt(((mean[borders.lower] - mean[borders.upper]) ** 2).sum(axis=1))
     if sigma_intensity is None:
-        sigma_intensity = _typical(difference)
+        sigma_intensity = typical_scale(difference)
     weight = borders.length_px * np.exp(-(difference / sigma_intensity) ** 2)
     if edge_magnitude is not None:
         edge_magnitude = np.asarray(edge_magnitude, dtype=float)
@@ -523,7 +524,7 @@ def ncut_segmentation(image, *, n_segments: int = 150, n_superpixels: int = 3000
                              f"image's {valid.shape}")
         edge = borders.max_along(edge_magnitude)
         if sigma_edge is None:
-            sigma_edge = _typical(edge)
+            sigma_edge = typical_scale(edge)
         weight *= np.exp(-(edge / sigma_edge) ** 2)
     if extra_affinity is not None:
         weight *= borders.lookup(extra_affinity)
