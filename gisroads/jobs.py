@@ -568,6 +568,8 @@ def _map_lines(map_source) -> gpd.GeoDataFrame:
     layer when it has one, else its first layer)."""
     if isinstance(map_source, gpd.GeoDataFrame):
         return map_source
+    if not Path(map_source).is_file():
+        raise ValueError(f"{map_source}: no such road map file")
     gpkg = str(map_source).lower().endswith(".gpkg")
     return read_layer(map_source, CENTRELINES if gpkg and CENTRELINES in
                       list_layers(map_source) else None)

@@ -143,3 +143,13 @@ def test_the_cli_takes_a_geographic_geojson_map(overpass, tmp_path, capsys):
     metrics = area_metrics(polygons, scene.truth.polygons)
     assert metrics.quality >= 0.8
     assert read_raster(tmp_path / "a.tif").crs == scene.crs
+
+
+def test_the_cli_names_a_missing_map(lidar_dir, tmp_path, capsys):
+    from gisroads.cli import main
+
+    status = main(["snakes", str(lidar_dir / "fusa.laz"), str(tmp_path / "none.gpkg"),
+                   "-o", str(tmp_path / "out.gpkg")])
+    assert status == 2
+    assert "none.gpkg: no such road map file" in capsys.readouterr().err
+    assert not (tmp_path / "out.gpkg").exists()
