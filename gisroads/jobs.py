@@ -8,16 +8,16 @@ from pathlib import Path
 
 import geopandas as gpd
 import numpy as np
+import shapely
 
 from .evaluate import evaluate_network, match_layers
-from .geo import CENTRELINES, POLYGONS, GeoRaster, network_from_centrelines
+from .geo import CENTRELINES, POLYGONS, GeoRaster
 from .io.las import las_info
-from .io.quicklook import evaluation_layers, write_quicklook
+from .io.quicklook import write_quicklook
 from .io.raster import raster_info, read_raster, write_geotiff
 from .io.vector import list_layers, read_layer, write_geopackage
 from .progress import Progress, report, scaled, to_json
 from .synthetic import make_scene, render_image, write_cloud
-from .synthetic.perturb import perturb_lines
 
 VECTOR_SUFFIXES = {".gpkg", ".geojson", ".json", ".shp", ".fgb", ".kml", ".gml"}
 
@@ -154,7 +154,7 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
     dict
         Output paths and counts.
     """
-    from .lidar.pipeline import DEFAULT_WIDTHS_M, extract_roads
+    from .lidar.pipeline import DEFAULT_WIDTHS_M, extract_roads, mosaic_cores
     from .lidar.tagging import tag_road_points
 
     roads = extract_roads(cloud_path, progress=scaled(progress, 0.0, 0.85), **options)
@@ -189,17 +189,18 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
         result["tagged_las"] = Path(tagged_las)
     if quicklook is not None:
         report(progress, 0.97, "drawing the quick-look")
-        tile = max(roads.tiles, key=lambda t: len(t.rectangles))
+        intensity = mosaic_cores([(t.tile, t.intensity) for t in roads.tiles],
+                                 roads.tiles[0].intensity.pixel_size)
+        working = intensity.crs
         write_quicklook(quicklook, [
-            (network.qa["rectangles"].to_crs(tile.intensity.crs),
+            (network.qa["rectangles"].to_crs(working),
              dict(facecolor="none", edgecolor="cyan", linewidth=0.6)),
-            (network.centrelines.to_crs(tile.intensity.crs),
+            (network.centrelines.to_crs(working),
              dict(color="red", linewidth=1.5, label="road centre lines")),
-            (network.junctions.to_crs(tile.intensity.crs),
+            (network.junctions.to_crs(working),
              dict(color="yellow", markersize=20, label="junctions")),
-        ], background=GeoRaster(tile.intensity.data[0], tile.intensity.transform,
-                                tile.intensity.crs),
-            title=f"{Path(cloud_path).name}: roads over the level-0 intensity image")
+        ], background=GeoRaster(intensity.data[0], intensity.transform, working),
+            title=f"{Path(cloud_path).name}: roads over the ground intensity (level 0)")
         result["quicklook"] = Path(quicklook)
     report(progress, 1.0, "done")
     return result
@@ -623,34 +624,37 @@ def snakes_job(cloud_path, map_source, out_path, *, curb_detector: str = "exp",
     return result
 
 
-def demo_job(out_dir, *, seed: int = 0, progress: Progress = None) -> dict:
-    """The demo: a synthetic scene, its truth, a degraded copy scored against it, a PNG.
+DEMO_DATA = Path(__file__).resolve().parents[1] / "data" / "demo"
+"""The bundled sample data (``data/demo`` beside ``gisroads/`` in the repository; its README
+gives the sources and licences)."""
+DEMO_IMAGE = "spacenet_paris_img1447.tif"
+DEMO_IMAGE_TRUTH = "osm_roads_img1447.geojson"
+DEMO_CLOUD = "ign_lidar_hd_0292_6833_thinned.laz"
 
-    The degraded copy stands in for an extraction: every road shifted 1.5 m and jittered,
-    10 % of the roads missed, three false roads added. Outputs in ``out_dir``: the files
-    of :func:`synth_job`, ``extracted.gpkg``, ``evaluation_qa.gpkg``, ``evaluation.json``
-    and ``quicklook.png``.
+
+def demo_job(out_dir, *, data_dir=DEMO_DATA, progress: Progress = None) -> dict:
+    """The demo on the bundled real data: both road pipelines, their GeoPackages and PNGs.
+
+    * the imagery pipeline on a SpaceNet Paris tile (RGB, 0.3 m), scored against its
+      OpenStreetMap centre lines (``image_roads.gpkg``, ``image_roads.png``,
+      ``image_evaluation.json``);
+    * the LiDAR pipeline on a thinned IGN LiDAR HD tile of a town (1 km², 0.29 points/m²,
+      processed at the coarser cell its density allows) (``lidar_roads.gpkg``,
+      ``lidar_roads.png``).
     """
-    out = Path(out_dir)
-    paths = synth_job(out, size_m=(400.0, 400.0), seed=seed, density_per_m2=8.0,
-                      pixel_m=0.5, progress=scaled(progress, 0.0, 0.7))
-    truth = read_layer(paths["truth"], CENTRELINES)
-    degraded = perturb_lines(truth, shift_m=1.5, jitter_m=0.5, drop_fraction=0.1,
-                             false_roads=3, seed=seed)
-    extracted = write_geopackage(out / "extracted.gpkg",
-                                 network_from_centrelines(degraded, method="demo").layers())
-    results = evaluate_job(extracted, paths["truth"], qa_path=out / "evaluation_qa.gpkg",
-                           progress=scaled(progress, 0.7, 0.95))
-    (out / "evaluation.json").write_text(to_json(results))
-    qa = {name: read_layer(out / "evaluation_qa.gpkg", name)
-          for name in ("eval_extracted", "eval_reference")}
-    write_quicklook(out / "quicklook.png", [
-        (read_layer(paths["truth"], POLYGONS), dict(color="yellow", alpha=0.25)),
-        *evaluation_layers(qa),
-        (read_layer(paths["truth"], "junctions"), dict(color="cyan", markersize=25,
-                                                      label="truth junctions")),
-    ], background=read_raster(paths["image"]),
-        title=f"gisroads demo: degraded network vs synthetic truth (seed {seed})")
+    from .evaluate import format_report
+
+    data, out = Path(data_dir), Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    image = image_job(data / DEMO_IMAGE, out / "image_roads.gpkg",
+                      quicklook=out / "image_roads.png", progress=scaled(progress, 0.0, 0.3))
+    footprint = gpd.GeoDataFrame(geometry=[shapely.box(*read_raster(data / DEMO_IMAGE).bounds)],
+                                 crs=read_layer(out / "image_roads.gpkg", CENTRELINES).crs)
+    evaluation = evaluate_network(read_layer(out / "image_roads.gpkg", CENTRELINES),
+                                  read_layer(data / DEMO_IMAGE_TRUTH), valid_area=footprint)
+    (out / "image_evaluation.json").write_text(to_json(evaluation))
+    lidar = lidar_job(data / DEMO_CLOUD, out / "lidar_roads.gpkg",
+                      quicklook=out / "lidar_roads.png", progress=scaled(progress, 0.3, 1.0))
     report(progress, 1.0, "done")
-    return {"paths": {k: str(v) for k, v in paths.items()}, "evaluation": results,
-            "quicklook": str(out / "quicklook.png")}
+    return {"image": image, "image_evaluation": evaluation,
+            "image_report": format_report(evaluation), "lidar": lidar}

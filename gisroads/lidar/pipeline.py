@@ -243,7 +243,7 @@ def assemble(results: list[TileRoads], *, crs, cell_m: float = 0.5) -> LidarRoad
                                         working),
                   "hypotheses": _concat([_in_core(r.hypotheses, r.tile) for r in results],
                                         working)}
-    heights = _mosaic_cores([(r.tile, r.heights) for r in results], cell_m) if results else None
+    heights = mosaic_cores([(r.tile, r.heights) for r in results], cell_m) if results else None
     if source is not None and working is not None and source != working:
         network = RoadNetwork(network.centrelines.to_crs(source),
                               network.polygons.to_crs(source),
@@ -252,8 +252,10 @@ def assemble(results: list[TileRoads], *, crs, cell_m: float = 0.5) -> LidarRoad
     return LidarRoads(network, heights, results)
 
 
-def _mosaic_cores(rasters: list[tuple[Tile, GeoRaster]], cell_m: float) -> GeoRaster:
-    """One raster over all tiles, each cell taken from the tile whose core holds it. Tile
+def mosaic_cores(rasters: list[tuple[Tile, GeoRaster]], cell_m: float) -> GeoRaster:
+    """One raster over all tiles (per-tile rasters such as ground heights or intensity
+    images, bands padded with NaN to the most levels), each cell taken from the tile whose
+    core holds it. Tile
     grids are aligned to multiples of ``cell_m`` (see :func:`ground_and_intensity`)."""
     xmin = min(t.core[0] for t, _ in rasters)
     ymin = min(t.core[1] for t, _ in rasters)

@@ -18,7 +18,7 @@ def gisroads(*args, cwd=None):
 def test_help_explains_every_subcommand():
     top = gisroads("--help")
     assert top.returncode == 0
-    for command in ("info", "synth", "evaluate", "demo"):
+    for command in ("info", "synth", "evaluate", "lidar", "image", "snakes", "blocks", "demo"):
         assert command in top.stdout
         sub = gisroads(command, "--help")
         assert sub.returncode == 0 and "--json" in sub.stdout and "metres" in sub.stdout
@@ -111,3 +111,18 @@ def test_lidar_writes_network_tagged_cloud_and_quicklook(tmp_path):
     tagged = read_las(tmp_path / "tagged.laz")
     assert (tagged.classification == 11).sum() == summary["tagged_points"]
     assert (tmp_path / "roads.png").stat().st_size > 10_000
+
+
+def test_demo_runs_both_pipelines_on_the_bundled_data(tmp_path):
+    result = gisroads("demo", "--out", tmp_path, "--json")
+    assert result.returncode == 0, result.stderr
+    demo = json.loads(result.stdout)
+    assert demo["image"]["roads"] >= 5 and demo["image"]["cues"] == "rgb"
+    # OpenStreetMap's lines run 2-5 m off the road centres: a 3 m buffer scores low for any
+    # method (measured 0.40 completeness)
+    assert demo["image_evaluation"]["buffer"]["completeness"] > 0.25
+    assert demo["lidar"]["roads"] >= 5 and demo["lidar"]["length_m"] > 500
+    for name in ("image_roads", "lidar_roads"):
+        assert list_layers(tmp_path / f"{name}.gpkg")[:3] == ["road_centrelines",
+                                                              "road_polygons", "junctions"]
+        assert (tmp_path / f"{name}.png").stat().st_size > 50_000
