@@ -66,7 +66,7 @@ import shapely
 from affine import Affine
 from scipy import ndimage
 
-from ..lidar.mincover import _variable, solver
+from ..optimize import solver, variable
 from ..progress import Progress, report, scaled
 
 #: Largest gap between two linked part ends, metres.
@@ -604,7 +604,7 @@ def select_gap_edges(gaps: gpd.GeoDataFrame, *, time_limit_s: float = 60.0
     out.attrs.update(objective=0.0, optimal=True)
     if len(candidates):
         model = pulp.LpProblem("subgraph_evaluation", pulp.LpMaximize)
-        x = {k: _variable(model, f"x{k}", cat=pulp.LpBinary) for k in candidates}
+        x = {k: variable(model, f"x{k}", cat=pulp.LpBinary) for k in candidates}
         model += pulp.lpDot([float(weight[k]) for k in candidates], list(x.values()))
         ends: dict = {}
         for k, (a, b) in enumerate(zip(*_end_keys(gaps))):

@@ -63,6 +63,7 @@ import shapely
 from scipy.sparse import csr_matrix
 
 from ..geo import GeoRaster
+from ..optimize import solver, variable
 from ..progress import Progress, report
 from ..vectorize.ribbons import rectangle_centrelines
 
@@ -276,33 +277,6 @@ def greedy_min_cover(hypotheses: gpd.GeoDataFrame, likelihood: GeoRaster, *,
     return _selected_frame(hypotheses, problem, positions, densities)
 
 
-def solver(*, time_limit_s: float | None = None, warm_start: bool = False):
-    """A CBC solver PuLP can run: the system's ``COIN_CMD`` (Debian's ``coinor-cbc``, the
-    only one in the QGIS environment, and the one PuLP 3 recommends), else PuLP's bundled
-    ``PULP_CBC_CMD``.
-
-    Raises
-    ------
-    RuntimeError
-        When PuLP finds neither.
-    """
-    available = pulp.listSolvers(onlyAvailable=True)
-    for name in ("COIN_CMD", "PULP_CBC_CMD"):
-        if name in available:
-            return pulp.getSolver(name, msg=False, timeLimit=time_limit_s,
-                                  warmStart=warm_start)
-    raise RuntimeError("no CBC solver for PuLP: install Debian's coinor-cbc "
-                       f"(PuLP offers only {available})")
-
-
-def _variable(model: pulp.LpProblem, name: str, **kwargs) -> pulp.LpVariable:
-    """A variable of ``model``; PuLP 3 deprecates free-standing variables, PuLP 2.6 (the QGIS
-    environment's) has nothing else."""
-    if hasattr(model, "add_variable"):
-        return model.add_variable(name, **kwargs)
-    return pulp.LpVariable(name, **kwargs)
-
-
 def _identical_columns(membership: csr_matrix):
     """Groups of seeds covered by exactly the same hypotheses, via two random projections
     of the membership columns (equal sets give bit-identical sums)."""
@@ -347,14 +321,14 @@ def exact_min_cover(hypotheses: gpd.GeoDataFrame, likelihood: GeoRaster, *,
     by_seed = membership.tocsc()
     dummy = np.bincount(group, weights=problem.dummy_cost, minlength=len(first))
     model = pulp.LpProblem("min_cover", pulp.LpMinimize)
-    x = [_variable(model, f"x{i}", cat=pulp.LpBinary) for i in range(n)]
-    u = [_variable(model, f"u{g}", lowBound=0, upBound=1) for g in range(len(first))]
+    x = [variable(model, f"x{i}", cat=pulp.LpBinary) for i in range(n)]
+    u = [variable(model, f"u{g}", lowBound=0, upBound=1) for g in range(len(first))]
     model += pulp.lpDot(problem.hyp_cost.tolist(), x) + pulp.lpDot(dummy.tolist(), u)
     for g, j in enumerate(first):
         covering = by_seed.indices[by_seed.indptr[j]:by_seed.indptr[j + 1]]
         model += pulp.LpAffineExpression([(x[i], 1) for i in covering] + [(u[g], 1)]) >= 1
-    for variable, start in zip(x, np.isin(np.arange(n), greedy)):
-        variable.setInitialValue(int(start))
+    for x_i, start in zip(x, np.isin(np.arange(n), greedy)):
+        x_i.setInitialValue(int(start))
     model.solve(solver(time_limit_s=time_limit_s, warm_start=True))
     chosen = np.flatnonzero([(v.varValue or 0) > 0.5 for v in x])
     positions, densities = _greedy(problem, a=a, d_max=np.inf,

@@ -11,7 +11,7 @@ from shapely import box
 
 from gisroads.geo import GeoRaster
 from gisroads.lidar.mincover import (cover_cost, cover_seeds, exact_min_cover,
-                                     greedy_min_cover, seed_likelihood, solver)
+                                     greedy_min_cover, seed_likelihood)
 
 UTM = CRS.from_epsg(32633)
 
@@ -175,10 +175,6 @@ def test_progress_reaches_one_and_empty_input_gives_empty_frame():
     assert calls[-1] == 1.0 and all(0 <= f <= 1 for f in calls)
     empty = greedy_min_cover(hyp.iloc[:0], lik, l_max=1.0)
     assert len(empty) == 0 and "order" in empty and empty.attrs["cover_cost"] == 0.0
-
-
-def test_solver_is_cbc():
-    assert type(solver()).__name__ in ("PULP_CBC_CMD", "COIN_CMD")
 
 
 def random_instance(seed):
