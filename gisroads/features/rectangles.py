@@ -275,8 +275,8 @@ def boundary_strength(features: RotatedFeatures, r0, c0, width_px, length_px, *,
     return np.minimum(near_side, far_side)
 
 
-def _side_contrast(features: RotatedFeatures, line_row, c0, c1, band, outward) -> np.ndarray:
-    """Mean intensity in the band of ``band`` rows outside a window side minus that in the
+def side_step(features: RotatedFeatures, line_row, c0, c1, band, outward) -> np.ndarray:
+    """The step of Eq. (1) at a line, over columns ``[c0, c1)``: mean intensity in the band of ``band`` rows outside a window side minus that in the
     band inside it; the side lies between rows ``line_row - 1`` and ``line_row`` and the
     outside is above it (``outward = -1``) or below it (``outward = +1``)."""
     above = _band_mean(features, line_row - band, line_row, c0, c1)
@@ -285,7 +285,8 @@ def _side_contrast(features: RotatedFeatures, line_row, c0, c1, band, outward) -
 
 
 def sides_on_strongest_edges(features: RotatedFeatures, r0, c0, width_px, length_px, *,
-                             edge_band_px, slack_px, ratio: float = 0.5) -> np.ndarray:
+                             edge_band_px, slack_px, ratio: float = 0.5,
+                             min_step: float = 0.0, end_px: int = 0) -> np.ndarray:
     """Whether the long sides of windows are the road's edges: no line inside a window
     steps from bright to dark as strongly as its sides do.
 
@@ -307,20 +308,29 @@ def sides_on_strongest_edges(features: RotatedFeatures, r0, c0, width_px, length
     r0, c0 = np.broadcast_arrays(*(np.asarray(a) for a in (r0, c0)))
     width_px = np.broadcast_to(np.asarray(width_px), r0.shape)
     c1 = c0 + np.asarray(length_px)
-    # a side's step is the greatest within the slack of it: the sampled width may put the
-    # far side up to a metre or two off the kerb
-    near = np.max([_side_contrast(features, r0 + k, c0, c1, edge_band_px, -1)
-                   for k in range(-slack_px, slack_px + 1)], axis=0)
-    far = np.max([_side_contrast(features, r0 + width_px + k, c0, c1, edge_band_px, 1)
-                  for k in range(-slack_px, slack_px + 1)], axis=0)
-    ok = np.ones(r0.shape, dtype=bool)
+
+    def step(line, outward, start, stop):
+        # a side's step is the greatest within the slack of it: the sampled width may put
+        # the far side up to a metre or two off the kerb
+        return np.max([side_step(features, line + k, start, stop, edge_band_px, outward)
+                       for k in range(-slack_px, slack_px + 1)], axis=0)
+
+    near = step(r0, -1, c0, c1)
+    far = step(r0 + width_px, 1, c0, c1)
+    ok = (near >= min_step) & (far >= min_step)
+    if end_px:
+        # a long window a degree off its road has the sides of one end or both off the kerbs
+        piece = np.minimum(end_px, c1 - c0)
+        for start, stop in ((c0, c0 + piece), (c1 - piece, c1)):
+            for line, outward in ((r0, -1), (r0 + width_px, 1)):
+                ok &= ~(step(line, outward, start, stop) < min_step)
     for offset in range(slack_px + 1, int(width_px.max(initial=0)) - slack_px):
         inner = offset < width_px - slack_px
         at = np.flatnonzero(inner & ok)
         if len(at) == 0:
             continue
         line = r0[at] + offset
-        down = _side_contrast(features, line, c0[at], c1[at], edge_band_px, -1)
+        down = side_step(features, line, c0[at], c1[at], edge_band_px, -1)
         ok[at] = ~((down > ratio * near[at]) | (-down > ratio * far[at]))
     return ok
 

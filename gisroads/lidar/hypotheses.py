@@ -37,7 +37,8 @@ from scipy import ndimage
 from ..features.edges import dominant_orientations
 from ..features.rectangles import (THETA2_RAD, boundary_strength, compose,
                                    interior_strength, rotate_to, rotated_features,
-                                   rotated_frame, sides_on_strongest_edges, valid_fraction)
+                                   rotated_frame, side_step, sides_on_strongest_edges,
+                                   valid_fraction)
 from ..geo import GeoRaster
 from ..progress import Progress, report
 from ..segmentation.ncut import segment_boundaries
@@ -72,13 +73,23 @@ EDGE_RATIO = 0.5
 a tenth to a fifth; a sidewalk's kerb or a median's edge as much as the sides)."""
 EDGE_SLACK_M = 1.0
 """Steps within this distance of a side are the side's (widths are sampled metres apart)."""
+EDGE_END_M = 40.0
+"""Both ends of a window, over this length (the shortest window), must have their sides on
+steps of at least T_bd too: a 300 m window 1 degree off its road drifts 5 m across it, and
+its mean step along the whole side hides that (20 m also cut windows on curved streets)."""
+SNAP_M = 2.0
+"""A corner's boundary row moves to the strongest step within this distance (metres), a
+sidewalk's width: windows start on the kerb whichever line NCut split at."""
+MIN_ELONGATION = 3.0
+"""Least length / width of a window: elongation is what tells a road from a parking lot
+(Sec. 1); a 25 m x 40 m window fitted a 25 m x 33 m lot."""
 OVERHANG_M = 20.0
 """Farthest a window's centre line may reach off the image, metres: half the shortest
 window; a 300 m window reaching 110 m off was valid on its part inside, 2 degrees off
 the road."""
 """A window's side must be the strongest step within this distance (metres), a sidewalk's
 width and a bit: 0 turns the check off."""
-FAN_RAD = tuple(np.radians((-2.0, 0.0, 2.0)))
+FAN_RAD = tuple(np.radians((-3.0, -1.5, 0.0, 1.5, 3.0)))
 """Offsets tried around each dominant orientation: roads a few degrees apart share one
 histogram peak, and a rigid 150 m window 2 degrees off drifts 5 m across its road."""
 CORNER_STEP_M = 2.0
@@ -149,19 +160,22 @@ def _straight_boundary_corners(rotated_labels, *, step_px: int, straight_px: int
     return rows[keep] + 1, cols[keep]
 
 
-def _windows(line_row, col, width_px, length_px) -> tuple[np.ndarray, ...]:
+def _windows(line_rows, col, width_px, length_px) -> tuple[np.ndarray, ...]:
     """Every window with a long side on a corner's boundary, on either side of it and
     running forwards or backwards from the corner, deduplicated.
 
+    ``line_rows`` holds per corner the boundary row of the windows below it and that of
+    the windows above it (see :func:`_snapped_rows`).
+
     Returns ``r0, c0, width_index, length_index``, one entry per window.
     """
-    n, n_w, n_l = len(line_row), len(width_px), len(length_px)
+    n, n_w, n_l = len(line_rows), len(width_px), len(length_px)
     shape = (n, 2, 2, n_w, n_l)
     below_or_above = np.arange(2).reshape(1, 2, 1, 1, 1)
     forward_or_back = np.arange(2).reshape(1, 1, 2, 1, 1)
     w_index = np.broadcast_to(np.arange(n_w).reshape(1, 1, 1, n_w, 1), shape).ravel()
     l_index = np.broadcast_to(np.arange(n_l).reshape(1, 1, 1, 1, n_l), shape).ravel()
-    r0 = np.broadcast_to(line_row.reshape(n, 1, 1, 1, 1)
+    r0 = np.broadcast_to(np.asarray(line_rows).reshape(n, 2, 1, 1, 1)
                          - below_or_above * width_px.reshape(1, 1, 1, n_w, 1), shape).ravel()
     c0 = np.broadcast_to(col.reshape(n, 1, 1, 1, 1)
                          - forward_or_back * length_px.reshape(1, 1, 1, 1, n_l), shape).ravel()
@@ -172,6 +186,30 @@ def _windows(line_row, col, width_px, length_px) -> tuple[np.ndarray, ...]:
     key = (((r0 + shift) * span_c + (c0 + shift)) * n_w + w_index) * n_l + l_index
     _, first = np.unique(key, return_index=True)
     return r0[first], c0[first], w_index[first], l_index[first]
+
+
+def _snapped_rows(features, line_row, col, *, reach_px: int, span_px: int, band_px: int
+                  ) -> np.ndarray:
+    """Each corner's boundary row moved to the strongest step within ``reach_px`` rows, over
+    the ``span_px`` columns around it: one row for windows below the boundary (brighter
+    above) and one for windows above it (brighter below).
+
+    NCut puts a boundary at the kerb or at the sidewalk's outer line, whichever its
+    intensity groups split at; the window's side belongs on the stronger step, the kerb.
+
+    Returns
+    -------
+    ndarray of int, shape (n, 2)
+    """
+    offsets = np.arange(-reach_px, reach_px + 1)
+    rows = line_row[:, None] + offsets[None, :]
+    c0 = (col - span_px // 2)[:, None]
+    snapped = []
+    for outward in (-1, 1):
+        step = side_step(features, rows, c0, c0 + span_px, band_px, outward)
+        best = np.argmax(np.where(np.isfinite(step), step, -np.inf), axis=1)
+        snapped.append(line_row + offsets[best])
+    return np.stack(snapped, axis=1)
 
 
 def _centre_line_inside(to_image: Affine, shape, r0, c0, width_px, length_px, *,
@@ -231,7 +269,10 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
                     straight_m: float = STRAIGHT_M, t_bd: float = T_BD, t_int: float = T_INT,
                     theta2_rad: float = THETA2_RAD, band_m: float = BAND_M,
                     edge_band_m: float = EDGE_BAND_M, edge_ratio: float = EDGE_RATIO,
-                    edge_slack_m: float = EDGE_SLACK_M, overhang_m: float = OVERHANG_M,
+                    edge_slack_m: float = EDGE_SLACK_M,
+                    edge_min_step: float = T_BD, edge_end_m: float = EDGE_END_M,
+                    overhang_m: float = OVERHANG_M,
+                    min_elongation: float = MIN_ELONGATION, snap_m: float = SNAP_M,
                     min_valid_fraction: float = 0.5, beta_bd: float = 1.0,
                     beta_int: float = 1.0, max_hypotheses: int | None = 200_000,
                     progress: Progress = None) -> gpd.GeoDataFrame:
@@ -314,6 +355,7 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
         raise ValueError("windows must be at least 2 pixels wide and 1 pixel long")
     band_px = max(int(round(band_m / cell_m)), 1)
     edge_band_px = max(int(round(edge_band_m / cell_m)), 1)
+    snap_px = int(round(snap_m / cell_m))
     edge_slack_px = max(int(round(edge_slack_m / cell_m)), 1)
     step_px = max(int(round(corner_step_m / cell_m)), 1)
     straight_px = max(int(round(straight_m / cell_m)), 3)
@@ -333,7 +375,12 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
         rotated_labels, _ = rotate_to(labels, theta, order=0, cval=-1)
         line_row, col = _straight_boundary_corners(rotated_labels, step_px=step_px,
                                                    straight_px=straight_px)
-        r0, c0, w_index, l_index = _windows(line_row, col, width_px, length_px)
+        line_rows = (_snapped_rows(features, line_row, col, reach_px=snap_px, span_px=straight_px,
+                                   band_px=edge_band_px) if snap_px
+                     else np.stack([line_row, line_row], axis=1))
+        r0, c0, w_index, l_index = _windows(line_rows, col, width_px, length_px)
+        elongated = np.flatnonzero(length_px[l_index] >= min_elongation * width_px[w_index])
+        r0, c0, w_index, l_index = (a[elongated] for a in (r0, c0, w_index, l_index))
         # S_bd first: it rejects most windows, the rest need S_int and the data check.
         s_bd = boundary_strength(features, r0, c0, width_px[w_index], length_px[l_index],
                                  band_px=band_px)
@@ -349,7 +396,8 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
             at = np.flatnonzero(keep)
             keep[at] = sides_on_strongest_edges(
                 features, r0[at], c0[at], w[at], length[at], edge_band_px=edge_band_px,
-                slack_px=edge_slack_px, ratio=edge_ratio)
+                slack_px=edge_slack_px, ratio=edge_ratio, min_step=edge_min_step,
+                end_px=int(round(edge_end_m / cell_m)))
         keep = np.flatnonzero(keep)
         found.append(np.stack([r0[keep], c0[keep], w_index[keep], l_index[keep],
                                np.full(len(keep), index), s_bd[keep], s_int[keep]], axis=1))
