@@ -287,27 +287,42 @@ def side_step(features: RotatedFeatures, line_row, c0, c1, band, outward) -> np.
 def sides_on_strongest_edges(features: RotatedFeatures, r0, c0, width_px, length_px, *,
                              edge_band_px, slack_px, ratio: float = 0.5,
                              min_step: float = 0.0, end_px: int = 0) -> np.ndarray:
-    """Whether the long sides of windows are the road's edges: no line inside a window
-    steps from bright to dark as strongly as its sides do.
+    """Whether the long sides of windows are the road's edges: steps from bright to dark,
+    with no line inside a window stepping as strongly.
 
     The step at a line is the contrast of Eq. (1) with a thin band of ``edge_band_px``
-    rows (mean outside minus mean inside, for a side's polarity); a side's step is the
-    greatest within ``slack_px`` rows of it. A window fails when a line inside it, more
-    than ``slack_px`` rows from its sides, over its columns, has a step of either side's
-    polarity above ``ratio`` times that side's step. A window as wide as
-    the road and its sidewalks has its sides on the sidewalk-grass line and the kerbs, a
-    stronger step, inside; one over both carriageways of a dual road and their median
-    has the median's edges inside; both fail. A window on the kerbs, or a little inside
-    them (the sampled widths are a few metres apart), passes: only lane markings and noise
-    step inside it.
+    rows (:func:`side_step`, for a side's polarity); a side's step is the greatest within
+    ``slack_px`` rows of it. A window fails when
+
+    - a side's step over the whole window, or over either end of ``end_px`` columns, is
+      below ``min_step`` (a long window a degree off its road has an end off the kerbs);
+    - a line inside it, more than ``slack_px`` rows from its sides, has a step of either
+      side's polarity above ``ratio`` times that side's step.
+
+    A window as wide as the road and its sidewalks has its sides on the sidewalk-grass
+    line and the kerbs, a stronger step, inside; one over both carriageways of a dual road
+    and their median has the median's edges inside; both fail. A window on the kerbs, or
+    a little inside them (the sampled widths are a few metres apart), passes: only lane
+    markings and noise step inside it.
+
+    Parameters
+    ----------
+    features : RotatedFeatures
+    r0, c0, width_px, length_px : array_like of int
+        Windows as in :func:`boundary_strength`, broadcast together.
+    edge_band_px, slack_px : int
+    ratio, min_step : float
+    end_px : int
+        Length of the end pieces checked; 0 checks the whole sides only.
 
     Returns
     -------
-    ndarray of bool
+    ndarray of bool, the broadcast shape of the windows
     """
-    r0, c0 = np.broadcast_arrays(*(np.asarray(a) for a in (r0, c0)))
-    width_px = np.broadcast_to(np.asarray(width_px), r0.shape)
-    c1 = c0 + np.asarray(length_px)
+    shape = np.broadcast_shapes(*(np.shape(a) for a in (r0, c0, width_px, length_px)))
+    r0, c0, width_px, length_px = (np.broadcast_to(a, shape).ravel()
+                                   for a in (r0, c0, width_px, length_px))
+    c1 = c0 + length_px
 
     def step(line, outward, start, stop):
         # a side's step is the greatest within the slack of it: the sampled width may put
@@ -332,7 +347,7 @@ def sides_on_strongest_edges(features: RotatedFeatures, r0, c0, width_px, length
         line = r0[at] + offset
         down = side_step(features, line, c0[at], c1[at], edge_band_px, -1)
         ok[at] = ~((down > ratio * near[at]) | (-down > ratio * far[at]))
-    return ok
+    return ok.reshape(shape)
 
 
 def valid_fraction(features: RotatedFeatures, r0, c0, width_px, length_px) -> np.ndarray:

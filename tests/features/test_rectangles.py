@@ -7,7 +7,8 @@ from affine import Affine
 from gisroads.features.rectangles import (THETA2_RAD, box_sums, boundary_strength, compose,
                                           direction_in_pixels, integral_image,
                                           interior_sign, interior_strength, rotate_to,
-                                          rotated_features, rotated_frame, valid_fraction)
+                                          rotated_features, rotated_frame, side_step,
+                                          sides_on_strongest_edges, valid_fraction)
 
 
 def _apply(t, u, v):
@@ -157,3 +158,60 @@ def test_valid_fraction_and_interior_strength_ignore_missing_cells():
     # the NaN half lends no cells, so the mean signed edge over valid cells stays 1
     assert interior_strength(features, 2, 5, 6, 5) == pytest.approx(1.0, abs=0.05)
     assert np.isnan(interior_strength(features, 2, 0, 6, 3))
+
+
+def _profile_rows(profile, cols=60):
+    """An image whose rows take the values of ``profile``, constant along the columns."""
+    return np.repeat(np.asarray(profile, float)[:, None], cols, axis=1)
+
+
+# grass 0.9 | sidewalk 0.5 (4 rows) | road 0.1 (16 rows) | sidewalk | grass
+SIDEWALK_ROAD = [0.9] * 10 + [0.5] * 4 + [0.1] * 16 + [0.5] * 4 + [0.9] * 10
+
+
+def test_side_step_is_the_thin_band_contrast_with_the_side_polarity():
+    features = _features(_profile_rows(SIDEWALK_ROAD))
+    # the kerb at row 14: 2 sidewalk rows above (0.5) against 2 road rows below (0.1)
+    assert side_step(features, 14, 0, 60, 2, -1) == pytest.approx(0.4)
+    assert side_step(features, 10, 0, 60, 2, -1) == pytest.approx(0.4)  # grass-sidewalk
+    assert side_step(features, 12, 0, 60, 2, -1) == pytest.approx(0.0)  # mid-sidewalk
+    assert side_step(features, 30, 0, 60, 2, 1) == pytest.approx(0.4)  # far kerb, mirrored
+    assert side_step(features, 14, 0, 60, 2, 1) == pytest.approx(-0.4)
+
+
+def test_window_sides_must_be_the_road_edges():
+    features = _features(_profile_rows(SIDEWALK_ROAD))
+    check = dict(edge_band_px=2, slack_px=1, ratio=0.5, min_step=0.08)
+    # on the kerbs (rows 14-30), a row short of a kerb (the slack), and over the sidewalks
+    r0 = np.array([14, 14, 10, 10])
+    width = np.array([16, 15, 24, 20])
+    ok = sides_on_strongest_edges(features, r0, np.zeros(4, int), width, np.full(4, 60),
+                                  **check)
+    # the last two hold a kerb inside them, as strong a step as their sides
+    np.testing.assert_array_equal(ok, [True, True, False, False])
+    # inside the road both sides step by nothing: below min_step
+    assert not sides_on_strongest_edges(features, 18, 0, 8, 60, **check)
+
+
+def test_a_window_over_both_carriageways_and_their_median_is_refused():
+    # carriageway 0.1 (8 rows) | median 0.9 (6 rows) | carriageway | then grass
+    profile = [0.9] * 8 + [0.1] * 8 + [0.9] * 6 + [0.1] * 8 + [0.9] * 8
+    features = _features(_profile_rows(profile))
+    check = dict(edge_band_px=2, slack_px=1, ratio=0.5)
+    both = sides_on_strongest_edges(features, 8, 0, 22, 60, **check)
+    each = sides_on_strongest_edges(features, [8, 22], [0, 0], [8, 8], [60, 60], **check)
+    assert not both
+    assert each.all()
+
+
+def test_a_tilted_window_is_refused_by_its_ends():
+    # a long road, its kerbs on rows 14 and 30 over the first 40 columns and 4 rows lower
+    # over the last 40: a window on the first part's kerbs has its far end off them
+    image = np.full((50, 120), 0.9)
+    image[14:30, :80] = 0.1
+    image[18:34, 80:] = 0.1
+    features = _features(image)
+    check = dict(edge_band_px=2, slack_px=1, ratio=0.5, min_step=0.08)
+    assert sides_on_strongest_edges(features, 14, 0, 16, 120, **check)  # whole side: 2/3
+    assert not sides_on_strongest_edges(features, 14, 0, 16, 120, end_px=40, **check)
+    assert sides_on_strongest_edges(features, 14, 0, 16, 80, end_px=40, **check)

@@ -198,6 +198,31 @@ def test_straight_road_on_the_grid_gives_exact_windows():
     assert (on_image >= 0.5 * 400 - 1e-6).all()  # windows lie mostly on data
 
 
+def test_windows_start_on_the_kerb_where_the_segments_split_at_the_sidewalk():
+    """A 10 m road (rows 40-59) with 2 m sidewalks (rows 36-39, 60-63) on grass, segmented
+    at the sidewalks' outer lines: the windows snap to the kerbs and take the road's
+    width; the 14 m of road and sidewalks, the first thing the segments offer, and windows
+    stubbier than three times their width are refused."""
+    image = np.full((100, 400), 0.9, np.float32)
+    image[36:64] = 0.5
+    image[40:60] = 0.1
+    labels = (image < 0.7).astype(np.int32)
+    raster = GeoRaster(image, TRANSFORM, CRS_)
+    zeros = np.zeros(image.shape, np.float32)
+    kwargs = dict(widths_m=(10.0, 14.0), lengths_m=(40.0, 80.0), orientations_rad=[0.0])
+    hypotheses = road_hypotheses(raster, zeros, zeros, labels, **kwargs)
+    assert set(hypotheses["width_m"]) == {10.0}
+    north, south = TRANSFORM.f - 40 * CELL_M, TRANSFORM.f - 60 * CELL_M
+    bounds = np.array([g.bounds for g in hypotheses.geometry.values])
+    np.testing.assert_allclose(bounds[:, [1, 3]], np.tile([south, north], (len(bounds), 1)))
+    unsnapped = road_hypotheses(raster, zeros, zeros, labels, snap_m=0.0, edge_ratio=0.0,
+                                **kwargs)
+    assert 14.0 in set(unsnapped["width_m"])
+    stubby = road_hypotheses(raster, zeros, zeros, labels, widths_m=(10.0,),
+                             lengths_m=(20.0, 40.0), orientations_rad=[0.0])
+    assert set(stubby["length_m"]) == {40.0}
+
+
 def test_missing_data_counts_as_missing():
     image, road, _ = _scene(seed=1)
     rng = np.random.default_rng(2)

@@ -9,7 +9,7 @@ from gisroads.io.las import concatenate
 from gisroads.io.raster import raster_info, read_raster
 from gisroads.lidar.ground import ground_planes
 from gisroads.lidar.intensity import (fill_holes, image_grid, intensity_images,
-                                      write_intensity_images)
+                                      split_share, write_intensity_images)
 from gisroads.synthetic import make_scene, render_cloud
 
 RNG = np.random.default_rng(11)
@@ -157,6 +157,35 @@ def test_write_intensity_images_round_trip(tmp_path):
     index = read_raster(index_path)
     assert index.nodata == -1
     np.testing.assert_array_equal(index.data[0], [[1, 0], [0, 0]])
+
+
+def test_split_share_is_measured_where_single_and_split_returns_meet():
+    # cell 0: single returns 100, 300 and a split return 80 (share 80 / 200 = 0.4);
+    # cell 1: the same ground at 0.5; cell 2 holds split returns only and tells nothing
+    intensity = np.array([100.0, 300.0, 80.0, 200.0, 100.0, 30.0, 30.0])
+    single = np.array([True, True, False, True, False, False, False])
+    cell = np.array([0, 0, 0, 1, 1, 2, 2])
+    use = np.ones(7, bool)
+    assert split_share(intensity, single, use, cell) == pytest.approx(0.45)  # the median
+    assert split_share(intensity, np.ones(7, bool), use, cell) == 1.0
+    assert split_share(intensity, single, cell != 0, cell) == pytest.approx(0.5)
+
+
+def test_split_returns_are_brought_to_the_single_return_scale():
+    # 1 m cells over (0, 0)-(2, 1): the left cell has single returns of 300 and a split
+    # return of 120 (share 0.4); the right one only split returns of 60, i.e. 150
+    xyz = points([(0.3, 0.5), (0.6, 0.5), (1.5, 0.5), (1.6, 0.5)])
+    intensity = np.array([300.0, 120.0, 60.0, 60.0])
+    single = np.array([True, False, False, False])
+    level = np.zeros(4, int)
+    kwargs = dict(cell_m=1.0, bounds=(0, 0, 2, 1), percentiles=FULL_RANGE, fill_radius_m=0)
+    corrected = intensity_images(xyz, intensity, level, single_return=single, **kwargs)
+    raw = intensity_images(xyz, intensity, level, **kwargs)
+    assert corrected.intensity_range == (150.0, 300.0)
+    np.testing.assert_allclose(corrected.image.data[0], [[1.0, 0.0]])
+    assert raw.image.data[0, 0, 1] < raw.image.data[0, 0, 0]
+    with pytest.raises(ValueError, match="single_return"):
+        intensity_images(xyz, intensity, level, single_return=single[:2], **kwargs)
 
 
 def test_bad_input():
