@@ -364,16 +364,19 @@ def rectangles_network_job(rectangles_path, out_path) -> dict:
             "junctions": len(network.junctions)}
 
 
-def tag_job(cloud_path, polygons_path, heights_path, out_path, *,
+def tag_job(cloud_path, polygons_path, out_path, *, heights_path=None,
             tolerance_m: float = 0.3) -> dict:
     """Classify the road points of a cloud (class 11) from road polygons with a ``level``
-    column and the per-level ground-height GeoTIFF of the LiDAR pipeline's rasters.
+    column (level 0 where it is missing), level by level.
 
-    Polygons in any CRS are reprojected to the cloud's; the heights raster must be in the
-    cloud's (metre) working CRS, as the pipeline writes it.
+    The per-level ground heights come from the LiDAR pipeline's ``ground_heights.tif``
+    (``heights_path``, in the cloud's metre working CRS) or, without it, from the cloud's
+    own ground planes (:func:`gisroads.lidar.tagging.ground_level_heights`: the whole cloud
+    in memory), e.g. for ribbon-snake polygons. Polygons in any CRS are reprojected to the
+    cloud's.
     """
-    from .io.las import cloud_crs
-    from .lidar.tagging import tag_road_points
+    from .io.las import cloud_crs, read_las
+    from .lidar.tagging import ground_level_heights, tag_road_points
 
     working, _ = cloud_crs(cloud_path)
     polygons = read_layer(polygons_path, POLYGONS if str(polygons_path).endswith(".gpkg")
@@ -382,7 +385,8 @@ def tag_job(cloud_path, polygons_path, heights_path, out_path, *,
         raise ValueError(f"{polygons_path}: no road polygon")
     if working is not None and polygons.crs is not None:
         polygons = polygons.to_crs(working)
-    heights = read_raster(heights_path)
+    heights = (read_raster(heights_path) if heights_path is not None
+               else ground_level_heights(read_las(cloud_path)))
     tagged = tag_road_points(cloud_path, out_path, polygons, heights, tolerance_m=tolerance_m)
     return {"tagged_las": Path(out_path), "tagged_points": tagged}
 

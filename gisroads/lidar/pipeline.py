@@ -25,7 +25,7 @@ from ..vectorize.ribbons import rectangles_to_network, ribbons_to_network
 from .ground import GroundPlanes, ground_planes
 from .hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, likelihood_maps,
                          road_hypotheses)
-from .intensity import IntensityImages, image_grid, intensity_images
+from .intensity import IntensityImages, auto_cell_m, image_grid, intensity_images
 from .mincover import greedy_min_cover
 from .tagging import level_heights
 from .tiles import Tile, stitch_tiles, tile_grid
@@ -161,13 +161,6 @@ def _with_level(frame: gpd.GeoDataFrame, anchors, levelled: gpd.GeoDataFrame
         anchors, all_matches=False, return_distance=False)[1]
     frame["level"] = levelled["level"].to_numpy(np.int64)[nearest]
     return frame
-
-
-def auto_cell_m(point_count: int, area_m2: float) -> float:
-    """The intensity image cell for a cloud: the paper's 0.5 m, or about one mean point
-    spacing (1 / sqrt(density)) for sparser clouds, rounded up to 5 cm."""
-    spacing = 1.0 / np.sqrt(max(point_count, 1) / max(area_m2, 1e-9))
-    return float(max(0.5, np.ceil(spacing * 20.0) / 20.0))
 
 
 def extract_roads(path, *, tile_m: float = 300.0, overlap_m: float = 100.0,

@@ -16,6 +16,8 @@ from scipy import ndimage
 
 from ..geo import GeoRaster
 from ..io.las import PointCloud, write_classified
+from .ground import ground_planes
+from .intensity import auto_cell_m, image_grid
 
 ROAD_SURFACE_CLASS = 11
 """ASPRS class 11: road surface."""
@@ -62,6 +64,31 @@ def level_heights(xyz: np.ndarray, level: np.ndarray, n_levels: int, *, transfor
                                                                     return_indices=True)
         heights[k] = np.where(distance <= fill_cells, heights[k][near_r, near_c], np.nan)
     return GeoRaster(heights.astype(np.float32), transform, crs)
+
+
+def ground_level_heights(cloud: PointCloud, *, cell_m: float | None = None,
+                         **ground_options) -> GeoRaster:
+    """Per-level ground heights of a whole cloud from its own ground planes.
+
+    What :func:`road_point_mask` needs for road polygons that come without the LiDAR
+    pipeline's height raster (ribbon-snake polygons, hand-drawn ones): the same ground
+    levels (:func:`gisroads.lidar.ground.ground_planes`, ``ground_options``) and heights,
+    on one grid over the cloud, which is held in memory.
+
+    Parameters
+    ----------
+    cloud : PointCloud
+        Metres.
+    cell_m : float, optional
+        Grid cell; default :func:`gisroads.lidar.intensity.auto_cell_m` of the cloud.
+    """
+    bounds = (*cloud.xyz[:, :2].min(axis=0), *cloud.xyz[:, :2].max(axis=0))
+    if cell_m is None:
+        cell_m = auto_cell_m(len(cloud), (bounds[2] - bounds[0]) * (bounds[3] - bounds[1]))
+    planes = ground_planes(cloud.xyz, **ground_options)
+    transform, shape = image_grid(bounds, cell_m)
+    return level_heights(cloud.xyz, planes.level, planes.n_levels, transform=transform,
+                         shape=shape, crs=cloud.crs)
 
 
 def road_point_mask(xyz: np.ndarray, road_polygons: gpd.GeoDataFrame, heights: GeoRaster, *,

@@ -19,9 +19,10 @@ class TagRoadPoints(GisroadsAlgorithm):
         "tolerance of the ground surface of that polygon's level: on a bridge, the deck "
         "points belong to the deck road and the points of the road below to that road, "
         "never each other. The road polygons come from a gisroads road network (their "
-        "<i>level</i> field; level 0 where it is missing) and the level surfaces from the "
-        "ground_heights.tif the LiDAR road network algorithm writes into its raster "
-        "folder.</p>")
+        "<i>level</i> field; level 0 where it is missing): from the LiDAR road network, the "
+        "ribbon snakes or drawn by hand. The level surfaces come from the ground_heights.tif "
+        "the LiDAR algorithms write or, when none is given, from the cloud's own ground "
+        "planes (the whole cloud is then read into memory).</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         params = [
@@ -33,8 +34,9 @@ class TagRoadPoints(GisroadsAlgorithm):
              "a gisroads GeoPackage (its road_polygons layer) or any polygon file with "
              "a level field"),
             (QgsProcessingParameterFile("HEIGHTS", self.tr("Ground heights per level"),
-                                        fileFilter="GeoTIFF (*.tif *.tiff)"),
-             "ground_heights.tif from the LiDAR road network's raster folder"),
+                                        fileFilter="GeoTIFF (*.tif *.tiff)", optional=True),
+             "optional: ground_heights.tif from the LiDAR road network's raster folder (or "
+             "Ground planes and intensity image); empty: computed from the cloud"),
             (QgsProcessingParameterNumber("TOLERANCE", self.tr("Height tolerance (metres)"),
                                           QgsProcessingParameterNumber.Double, 0.3,
                                           minValue=0.01, maxValue=5.0),
@@ -52,8 +54,9 @@ class TagRoadPoints(GisroadsAlgorithm):
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
         with gisroads_errors():
             result = tag_job(self.parameterAsFile(parameters, "INPUT", context),
-                             self.parameterAsFile(parameters, "POLYGONS", context),
-                             self.parameterAsFile(parameters, "HEIGHTS", context), out,
+                             self.parameterAsFile(parameters, "POLYGONS", context), out,
+                             heights_path=self.parameterAsFile(parameters, "HEIGHTS",
+                                                               context) or None,
                              tolerance_m=self.parameterAsDouble(parameters, "TOLERANCE",
                                                                 context))
         feedback.pushInfo(f"{result['tagged_points']} road points tagged")

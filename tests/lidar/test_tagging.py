@@ -6,6 +6,8 @@ import shapely
 from affine import Affine
 
 from gisroads.io.las import read_las
+from gisroads.io.vector import write_geopackage
+from gisroads.jobs import tag_job
 from gisroads.lidar.tagging import level_heights, road_point_mask, tag_road_points
 from gisroads.synthetic import make_scene, road_surface_mask, write_cloud
 
@@ -84,3 +86,20 @@ def test_points_off_the_surface_are_not_road(bridge_scene):
     road = road_point_mask(cloud.xyz, polygons, heights)
     assert not road[cloud.classification == 1].any()  # car roofs
     assert road[cloud.classification == 5].mean() < 0.01  # canopy over roads
+
+
+def test_heights_from_the_clouds_own_ground_planes_tag_as_well(bridge_scene, tmp_path):
+    scene, path = bridge_scene
+    cloud = read_las(path)
+    _, polygons = truth_inputs(scene, cloud)
+    write_geopackage(tmp_path / "roads.gpkg", {"road_polygons": polygons})
+    result = tag_job(path, tmp_path / "roads.gpkg", tmp_path / "tagged.laz")
+    out = read_las(tmp_path / "tagged.laz")
+    road = out.classification == 11
+    assert result["tagged_points"] == road.sum()
+    truth = road_surface_mask(scene, out.xyz)
+    assert (road & truth).sum() / road.sum() > 0.95
+    assert (road & truth).sum() / truth.sum() > 0.9
+    deck_points = shapely.contains_xy(shapely.union_all(scene.bridges.geometry.values),
+                                      out.xyz[:, 0], out.xyz[:, 1]) & (cloud.classification == 17)
+    assert road[deck_points].mean() > 0.9

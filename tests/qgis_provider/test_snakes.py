@@ -72,3 +72,19 @@ def test_the_curb_attractor_is_bright_on_the_kerbs_and_dark_mid_road(qgis_proces
     on_kerb = sample_bilinear(a.astype(float), raster.transform, kerb_xy)
     mid_road = sample_bilinear(a.astype(float), raster.transform, middle_xy)
     assert np.median(on_kerb) > 3 * np.median(mid_road) + 0.1
+
+
+def test_tag_road_points_takes_the_ribbons_without_a_height_raster(qgis_process, streets,
+                                                                   tmp_path):
+    scene, folder = streets
+    qgis_process.run("ribbonsnakeroads", INPUT=folder / "cloud.laz",
+                     MAP=f"{folder / 'map.gpkg'}|layername=osm_lines", SNAP=6.0,
+                     OUTPUT=tmp_path / "roads.gpkg")
+    result = qgis_process.run("tagroadpoints", INPUT=folder / "cloud.laz",
+                              POLYGONS=tmp_path / "roads.gpkg", OUTPUT=tmp_path / "t.laz")
+    tagged = read_las(tmp_path / "t.laz")
+    road = tagged.classification == 11
+    assert result["TAGGED"] == road.sum() > 1000
+    truth_road = road_surface_mask(scene, tagged.xyz)
+    assert (road & truth_road).sum() >= 0.85 * road.sum()
+    assert (road & truth_road).sum() >= 0.8 * truth_road.sum()
