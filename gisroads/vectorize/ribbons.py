@@ -46,6 +46,7 @@ import numpy as np
 import shapely
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from ..evaluate.topology import line_graph
 from ..geo import RoadNetwork, network_from_centrelines
@@ -606,7 +607,25 @@ def ribbons_to_network(centrelines: gpd.GeoDataFrame, *, method: str,
     width = _weighted_mean(segment_width, segment_length, segment_owner, len(lines))
     score = (centrelines["score"].to_numpy(float) if "score" in centrelines
              else np.full(len(lines), np.nan))
-    return _pieces_to_network(lines, width, score, ribbon_areas(lines, per_vertex),
-                              centrelines.crs, method=method, join_gap_m=join_gap_m,
-                              angle_tol_deg=angle_tol_deg, smooth_m=smooth_m,
-                              min_length_m=min_length_m, qa=qa)
+    network = _pieces_to_network(lines, width, score, ribbon_areas(lines, per_vertex),
+                                 centrelines.crs, method=method, join_gap_m=join_gap_m,
+                                 angle_tol_deg=angle_tol_deg, smooth_m=smooth_m,
+                                 min_length_m=min_length_m, qa=qa)
+    if "widths_m" in centrelines:
+        network.centrelines["vertex_widths_m"] = vertex_widths_text(
+            network.centrelines.geometry.values, xy, vertex_width)
+    return network
+
+
+def vertex_widths_text(roads, ribbon_xy: np.ndarray, ribbon_width_m: np.ndarray) -> np.ndarray:
+    """Per road, the width at each of its vertices as text (``"7.21,7.30,..."``, metres,
+    one per vertex in order): that of the nearest ribbon vertex. A GeoPackage field holds
+    one value, so a road's varying width travels as this list beside its mean ``width_m``.
+    """
+    if len(roads) == 0:
+        return np.empty(0, dtype=object)
+    xy, owner = shapely.get_coordinates(roads, return_index=True)
+    _, nearest = cKDTree(ribbon_xy).query(xy)
+    text = np.char.mod("%.2f", ribbon_width_m[nearest])
+    starts = np.r_[0, np.flatnonzero(np.diff(owner)) + 1]
+    return np.array([",".join(part) for part in np.split(text, starts[1:])], dtype=object)

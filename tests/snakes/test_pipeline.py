@@ -39,6 +39,16 @@ def test_road_area_quality_against_the_truth_polygons(overpass):
     roads.network.validate()
 
 
+def test_centre_lines_carry_the_ribbon_width_at_every_vertex(overpass):
+    lines = overpass[3].network.centrelines
+    for geometry, mean, text in zip(lines.geometry, lines.width_m, lines.vertex_widths_m):
+        widths = np.array(text.split(","), float)
+        assert len(widths) == len(shapely.get_coordinates(geometry))
+        assert widths.min() <= mean + 0.01 and widths.max() >= mean - 0.01
+    truth = overpass[0].truth.centrelines.width_m
+    assert truth.min() - 3 < np.median(lines.width_m) < truth.max() + 3
+
+
 def test_the_bridge_and_the_avenue_under_it_are_two_ribbons_on_two_levels(overpass):
     scene, _, _, roads = overpass
     truth = scene.truth.centrelines

@@ -188,10 +188,18 @@ def test_ribbons_make_the_same_junctions_and_carry_widths():
     assert stem["width_m"].tolist() == [7.0] and stem["length_m"].iloc[0] == pytest.approx(40)
     assert set(net.centrelines["width_m"]) == {8.0, 7.0}    # the ribbon's weighted mean
     assert net.centrelines["method"].unique().tolist() == ["boyko-funkhouser"]
+    # the width at every vertex: the bar's halves run from 6 to 8 m and from 8 to 10 m
+    per_vertex = [np.array(text.split(","), float) for text in net.centrelines.vertex_widths_m]
+    assert [len(w) for w in per_vertex] == [len(coords(g)) for g in net.centrelines.geometry]
+    ends = sorted((w[0], w[-1]) if coords(g)[0][0] < coords(g)[-1][0] else (w[-1], w[0])
+                  for w, g, score in zip(per_vertex, net.centrelines.geometry,
+                                         net.centrelines.score) if score == 1.0)
+    assert ends == [(6.0, 8.0), (8.0, 10.0)]
     scalar = ribbons_to_network(ribbons.drop(columns="widths_m").assign(width_m=[8.0, 7.0]),
                                 method="x")
     assert scalar.junctions["degree"].tolist() == [3]
     assert scalar.polygons["area_m2"].sum() == pytest.approx(100 * 8 + 36 * 7, rel=0.01)
+    assert "vertex_widths_m" not in scalar.centrelines  # one width per ribbon: nothing to add
 
 
 def test_no_pieces_give_empty_contract_layers():
