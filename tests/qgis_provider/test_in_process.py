@@ -1,4 +1,6 @@
 """The provider's algorithms in this process (pytest-qgis): cancel, conversions, errors."""
+from pathlib import Path
+
 import geopandas as gpd
 import numpy as np
 import pytest
@@ -8,6 +10,8 @@ from qgis.core import (QgsApplication, QgsProcessingContext, QgsProcessingExcept
 
 from processing_provider.convert import source_to_frame, to_pyproj, to_qgis
 from processing_provider.provider import GisroadsProvider
+
+STYLES = Path(__file__).resolve().parents[2] / "styles"
 
 
 @pytest.fixture(scope="module")
@@ -66,3 +70,29 @@ def test_layer_to_frame_keeps_geometry_attributes_nulls_and_crs(qgis_app, tmp_pa
 def test_crs_round_trip(qgis_app):
     assert to_pyproj(to_qgis("EPSG:2154")).to_epsg() == 2154
     assert to_pyproj(to_qgis(None)) is None
+
+
+@pytest.mark.parametrize("fields, values, labels", [
+    ("field=passed:boolean", (True, False, None),
+     ["road part (passed)", "rejected (see reason)", "segment"]),
+    ("field=segment_id:integer", (7,), ["segment"]),  # a plain segmentation layer
+])
+def test_segments_style_tells_road_parts_from_rejected_segments(qgis_app, fields, values,
+                                                                 labels):
+    from qgis.core import QgsFeature, QgsGeometry, QgsRenderContext
+    layer = QgsVectorLayer(f"Polygon?crs=EPSG:32633&{fields}", "segments", "memory")
+    assert layer.loadNamedStyle(str(STYLES / "segments.qml"))[1]
+    features = []
+    for value in values:
+        feature = QgsFeature(layer.fields())
+        feature.setGeometry(QgsGeometry.fromWkt("POLYGON((0 0, 1 0, 1 1, 0 0))"))
+        feature[0] = value
+        features.append(feature)
+    layer.dataProvider().addFeatures(features)
+    context = QgsRenderContext()
+    renderer = layer.renderer().clone()
+    renderer.startRender(context, layer.fields())
+    matched = [[rule.label() for rule in renderer.rootRule().rulesForFeature(f, context)]
+               for f in layer.getFeatures()]
+    renderer.stopRender(context)
+    assert matched == [[label] for label in labels]
