@@ -24,7 +24,7 @@ from ..segmentation.grouping import group_segments
 from .cues import image_cues
 from .network import strings_to_network
 from .roadparts import extract_road_parts
-from .segments import segment_image
+from .segments import edge_strength, segment_image
 from .subgraph import context_rasters, link_road_parts
 
 METHOD = "grote-rottensteiner"
@@ -87,16 +87,19 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
 
     report(progress, 0.0, "image cues")
     cues = image_cues(image, nir_band=nir_band, red_band=red_band, dsm=dsm)
+    # one local-energy pass for the three stages that weigh edges
+    edges = edge_strength(image, nir_band=nir_band, bands=cues.bands)
     lap("cues")
     labels = segment_image(image, nir_band=nir_band, red_band=red_band,
-                           n_segments=n_segments,
+                           n_segments=n_segments, edge_magnitude=edges,
                            progress=scaled(progress, 0.02, 0.4))
     lap("segmentation")
     report(progress, 0.4, "grouping segments")
-    labels = group_segments(labels, image, dsm=dsm, ndvi=cues.ndvi,
-                            progress=scaled(progress, 0.4, 0.55))
+    labels = group_segments(labels, image, dsm=dsm, ndvi=cues.ndvi, nir_band=nir_band,
+                            edge_magnitude=edges, progress=scaled(progress, 0.4, 0.55))
     lap("grouping")
-    parts = extract_road_parts(labels, image, cues=cues, progress=scaled(progress, 0.55, 0.75),
+    parts = extract_road_parts(labels, image, cues=cues, edge_magnitude=edges,
+                               progress=scaled(progress, 0.55, 0.75),
                                **(road_part_criteria or {}))
     lap("road_parts")
     gaps, strings = link_road_parts(parts.road_parts, transform=image.transform,

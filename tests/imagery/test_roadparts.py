@@ -168,6 +168,30 @@ def test_dark_shadow_and_textured_strips_fail():
     assert len(parts) == 0
 
 
+def test_edge_contrast_tells_a_bounded_strip_from_one_cut_out_of_texture():
+    """An asphalt strip on grass has its edges on its border; the same strip cut out of a
+    striped texture (tree shadows) has as strong edges inside as on its border."""
+    _, bounded = _strip(75, 40, 8.0, 100.0, 0.0)
+    _, cut_out = _strip(75, 110, 8.0, 100.0, 0.0)
+    labels, image = _paint([(bounded, ASPHALT), (cut_out, ASPHALT)])
+    data = image.data.copy()
+    stripes = (np.arange(SHAPE[1]) // 12 % 2 == 1)[None, :] & (np.arange(SHAPE[0]) < 300)[:, None]
+    data[:, stripes] = np.array(SHADOW[:4], np.uint8)[:, None]  # 3 m stripes over the top half
+    texture = GeoRaster(data, T, CRS)
+    segments = measure_segments(labels, texture)
+    contrast = segments.set_index("segment_id")["edge_contrast"]
+    assert contrast[1] > 1.5
+    assert contrast[2] < 1.1
+    checked, parts = filter_road_parts(segments, edge_contrast_min=1.2,
+                                       intensity_std_max=1.0, intensity_range=(0.0, 1.0))
+    assert _row(checked, 1).passed
+    assert _row(checked, 2).reason == "no border edges"
+    assert parts.segment_id.tolist() == [1]
+    # off by default (it lost as much road as junk on the real images)
+    assert filter_road_parts(segments, intensity_std_max=1.0,
+                             intensity_range=(0.0, 1.0))[0].passed.sum() == 2
+
+
 def test_collinear_adjacent_parts_merge_and_a_crossing_part_does_not():
     _, west = _strip(30, 75, 8.0, 40.0, 0.0)      # x 10..50
     _, middle = _strip(70, 75, 8.0, 40.0, 1.0)    # x 50..90, touching west, 1 degree off
