@@ -22,7 +22,7 @@ def test_the_run_has_two_tiles_and_scores_like_one(two_tiles):
     assert len(tile_grid(scene.extent, tile_m=300.0, overlap_m=100.0)) == 2
     assert len(roads.tiles) == 2
     scores = buffer_metrics(roads.network.centrelines, scene.truth.centrelines, buffer_m=3.0)
-    assert scores.completeness >= 0.9 and scores.correctness >= 0.9  # measured 0.93 / 0.97
+    assert scores.completeness >= 0.9 and scores.correctness >= 0.9  # measured 0.99 / 0.97
 
 
 def test_roads_cross_the_seam_as_one_line(two_tiles):
