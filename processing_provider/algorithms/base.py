@@ -1,7 +1,8 @@
 """What every gisroads algorithm shares: group, translation hook, instance creation, help."""
 import re
 
-from qgis.core import QgsProcessingAlgorithm
+from qgis.core import (QgsProcessingAlgorithm, QgsProcessingOutputNumber,
+                       QgsProcessingParameterFile, QgsProcessingParameterFileDestination)
 from qgis.PyQt.QtCore import QCoreApplication
 
 
@@ -38,3 +39,40 @@ class GisroadsAlgorithm(QgsProcessingAlgorithm):
 
     def createInstance(self):  # noqa: N802
         return type(self)()
+
+    def add_parameters(self, params) -> None:
+        """Add ``(parameter, help text)`` pairs; a help of None leaves the parameter's own."""
+        for param, text in params:
+            if text is not None:
+                param.setHelp(self.tr(text))
+            self.addParameter(param)
+
+    def add_network_outputs(self) -> None:
+        """The numbers every road-network algorithm reports."""
+        for name, text in (("ROADS", "number of roads"), ("LENGTH_M", "total road length"),
+                           ("JUNCTIONS", "number of junctions")):
+            self.addOutput(QgsProcessingOutputNumber(name, self.tr(text)))
+
+    @staticmethod
+    def network_outputs(result: dict, feedback, detail: str = "") -> dict:
+        """Report a road network job's figures and return them as the algorithm's outputs."""
+        feedback.pushInfo(f"{result['roads']} roads, {result['length_m']:.0f} m, "
+                          f"{result['junctions']} junctions{detail}")
+        return {"ROADS": result["roads"], "LENGTH_M": result["length_m"],
+                "JUNCTIONS": result["junctions"]}
+
+
+def cloud_input(tr, text: str) -> QgsProcessingParameterFile:
+    """The LAS/LAZ point cloud parameter ``INPUT``."""
+    param = QgsProcessingParameterFile("INPUT", tr("Point cloud (LAS/LAZ)"),
+                                       fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)")
+    param.setHelp(tr(text))
+    return param
+
+
+def network_output(tr, text: str) -> QgsProcessingParameterFileDestination:
+    """The road-network GeoPackage parameter ``OUTPUT``."""
+    param = QgsProcessingParameterFileDestination("OUTPUT", tr("Road network"),
+                                                  "GeoPackage (*.gpkg)")
+    param.setHelp(tr(text))
+    return param

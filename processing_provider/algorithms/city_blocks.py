@@ -55,9 +55,7 @@ class CityBlocks(GisroadsAlgorithm):
                                                    "GeoPackage (*.gpkg)"),
              "GeoPackage receiving the city_blocks layer, in the raster's CRS"),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
+        self.add_parameters(params)
         self.addOutput(QgsProcessingOutputNumber("N_BLOCKS", self.tr("Number of blocks")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802

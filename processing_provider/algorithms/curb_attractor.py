@@ -1,14 +1,37 @@
 """Curb attractor map: where a road boundary is likely along a road map (Boyko & Funkhouser)."""
-from qgis.core import (QgsProcessing, QgsProcessingParameterEnum, QgsProcessingParameterFile,
+from qgis.core import (QgsProcessing, QgsProcessingParameterEnum,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination)
 
 from gisroads.jobs import attractor_job
 
 from ..convert import gisroads_errors, progress_callback, source_to_frame
-from .base import GisroadsAlgorithm
+from .base import GisroadsAlgorithm, cloud_input
 
 DETECTORS = ("exp", "step", "none")
+
+
+def map_guided_parameters(tr, cell_help: str) -> list:
+    """The inputs both map-guided algorithms share: cloud, map, curb detector, cell and
+    intersection snapping, as ``(parameter, help)`` pairs."""
+    return [
+        (cloud_input(tr, "the cloud; read chunk by chunk, only along the map"), None),
+        (QgsProcessingParameterFeatureSource("MAP", tr("Road map lines"),
+                                             [QgsProcessing.TypeVectorLine]),
+         "approximate road centre lines in any CRS (reprojected to the cloud's)"),
+        (QgsProcessingParameterEnum("DETECTOR", tr("Curb detector"),
+                                    options=["exp: Gaussian, 15 cm mean (paper's best)",
+                                             "step: 10-20 cm", "none: normals only"],
+                                    defaultValue=0),
+         "how the height step of a neighbourhood weights its normal's tilt"),
+        (QgsProcessingParameterNumber("CELL", tr("Attractor cell (metres)"),
+                                      QgsProcessingParameterNumber.Double, 0.5,
+                                      minValue=0.1, maxValue=5.0), cell_help),
+        (QgsProcessingParameterNumber("SNAP", tr("Intersection snapping (metres)"),
+                                      QgsProcessingParameterNumber.Double, 2.0,
+                                      minValue=0.01, maxValue=50.0),
+         "map line ends closer than this are one intersection"),
+    ]
 
 
 class CurbAttractorMap(GisroadsAlgorithm):
@@ -31,32 +54,12 @@ class CurbAttractorMap(GisroadsAlgorithm):
         "kerbs show as bright lines, the extent band as a faint 0.2 plateau.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        params = [
-            (QgsProcessingParameterFile("INPUT", self.tr("Point cloud (LAS/LAZ)"),
-                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)"),
-             "the cloud; read chunk by chunk, only along the map"),
-            (QgsProcessingParameterFeatureSource("MAP", self.tr("Road map lines"),
-                                                 [QgsProcessing.TypeVectorLine]),
-             "approximate road centre lines in any CRS (reprojected to the cloud's)"),
-            (QgsProcessingParameterEnum("DETECTOR", self.tr("Curb detector"),
-                                        options=["exp: Gaussian, 15 cm mean (paper's best)",
-                                                 "step: 10-20 cm", "none: normals only"],
-                                        defaultValue=0),
-             "how the height step of a neighbourhood weights its normal's tilt"),
-            (QgsProcessingParameterNumber("CELL", self.tr("Grid cell (metres)"),
-                                          QgsProcessingParameterNumber.Double, 0.5,
-                                          minValue=0.1, maxValue=5.0),
-             "cell of the attractor map; c is averaged per cell"),
-            (QgsProcessingParameterNumber("SNAP", self.tr("Intersection snapping (metres)"),
-                                          QgsProcessingParameterNumber.Double, 2.0,
-                                          minValue=0.01, maxValue=50.0),
-             "map line ends closer than this are one intersection"),
+        params = map_guided_parameters(self.tr,
+                                       "cell of the attractor map; c is averaged per cell") + [
             (QgsProcessingParameterRasterDestination("OUTPUT", self.tr("Attractor map")),
              "GeoTIFF of a = 0.2 e + c in the cloud's CRS"),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
+        self.add_parameters(params)
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)

@@ -65,9 +65,7 @@ class ImageSegmentation(GisroadsAlgorithm):
                                                QgsProcessing.TypeVectorPolygon),
              "segment polygons with segment_id and area_px"),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
+        self.add_parameters(params)
         self.addOutput(QgsProcessingOutputNumber("SEGMENTS", self.tr("Segments made")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802

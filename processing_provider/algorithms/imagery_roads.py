@@ -1,13 +1,12 @@
 """Imagery road network (Grote & Rottensteiner): the whole pipeline from an aerial image."""
-from qgis.core import (QgsProcessingOutputNumber, QgsProcessingOutputString,
-                       QgsProcessingParameterBand, QgsProcessingParameterFileDestination,
+from qgis.core import (QgsProcessingOutputString, QgsProcessingParameterBand,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer)
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import image_job
 
 from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
-from .base import GisroadsAlgorithm
+from .base import GisroadsAlgorithm, network_output
 
 
 class ImageryRoadNetwork(GisroadsAlgorithm):
@@ -51,16 +50,10 @@ class ImageryRoadNetwork(GisroadsAlgorithm):
                                           QgsProcessingParameterNumber.Integer, None,
                                           optional=True, minValue=10, maxValue=5000),
              "empty: one segment per 300 m² of ground (50-1500)"),
-            (QgsProcessingParameterFileDestination("OUTPUT", self.tr("Road network"),
-                                                   "GeoPackage (*.gpkg)"),
-             "GeoPackage receiving every layer, in the image's CRS"),
+            (network_output(self.tr, "GeoPackage receiving every layer, in the image's CRS"), None),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
-        for name, text in (("ROADS", "number of roads"), ("LENGTH_M", "total road length"),
-                           ("JUNCTIONS", "number of junctions")):
-            self.addOutput(QgsProcessingOutputNumber(name, self.tr(text)))
+        self.add_parameters(params)
+        self.add_network_outputs()
         self.addOutput(QgsProcessingOutputString("CUES", self.tr("Cues used")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
@@ -79,7 +72,5 @@ class ImageryRoadNetwork(GisroadsAlgorithm):
         load_geopackage_on_completion(context, out, (
             "segments", "road_parts", "gap_edges", "junction_connections", POLYGONS,
             CENTRELINES, JUNCTIONS), group="roads")
-        feedback.pushInfo(f"{result['roads']} roads, {result['length_m']:.0f} m, "
-                          f"{result['junctions']} junctions; cues: {result['cues']}")
-        return {"OUTPUT": out, "ROADS": result["roads"], "LENGTH_M": result["length_m"],
-                "JUNCTIONS": result["junctions"], "CUES": result["cues"]}
+        return {"OUTPUT": out, "CUES": result["cues"],
+                **self.network_outputs(result, feedback, f"; cues: {result['cues']}")}

@@ -1,7 +1,6 @@
 """Junction construction and network generation: road strings to the road-network GeoPackage."""
 from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterExtent,
-                       QgsProcessingParameterFeatureSource,
-                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber)
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber)
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.imagery.network import (BORDER_M, COLLINEAR_DEG, DEFAULT_QUALITY,
@@ -13,7 +12,7 @@ from gisroads.io.vector import write_geopackage
 
 from ..convert import (gisroads_errors, load_geopackage_on_completion, progress_callback,
                        source_to_frame)
-from .base import GisroadsAlgorithm
+from .base import GisroadsAlgorithm, network_output
 
 CONNECTIONS = "junction_connections"
 
@@ -90,18 +89,13 @@ class JunctionConstruction(GisroadsAlgorithm):
             (QgsProcessingParameterNumber("BORDER", self.tr("Near the border (metres)"),
                                           double, BORDER_M, minValue=0.0),
              "open ends this close to the extent's border count as leaving the image"),
-            (QgsProcessingParameterFileDestination("OUTPUT", self.tr("Road network"),
-                                                   "GeoPackage (*.gpkg)"),
-             "GeoPackage receiving road_centrelines, road_polygons, junctions and "
-             "junction_connections"),
+            (network_output(self.tr, "GeoPackage receiving road_centrelines, road_polygons, "
+                                     "junctions and junction_connections"), None),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
-        for name, text in (("ROADS", "number of roads"), ("LENGTH_M", "total road length"),
-                           ("JUNCTIONS", "number of junctions"),
-                           ("CONNECTIONS", "junction connections kept")):
-            self.addOutput(QgsProcessingOutputNumber(name, self.tr(text)))
+        self.add_parameters(params)
+        self.add_network_outputs()
+        self.addOutput(QgsProcessingOutputNumber("CONNECTIONS",
+                                                 self.tr("junction connections kept")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         source = self.parameterAsSource(parameters, "ROAD_STRINGS", context)
@@ -128,9 +122,8 @@ class JunctionConstruction(GisroadsAlgorithm):
         load_geopackage_on_completion(context, out, (POLYGONS, CONNECTIONS, CENTRELINES,
                                                      JUNCTIONS), group="roads")
         kept = int((connections["verified"] & connections["significant"]).sum())
-        result = {"ROADS": len(network.centrelines),
-                  "LENGTH_M": float(network.centrelines["length_m"].sum()),
-                  "JUNCTIONS": len(network.junctions), "CONNECTIONS": kept}
-        feedback.pushInfo(f"{result['ROADS']} roads, {result['LENGTH_M']:.0f} m, "
-                          f"{result['JUNCTIONS']} junctions, {kept} junction connections")
-        return {"OUTPUT": out, **result}
+        result = {"roads": len(network.centrelines),
+                  "length_m": float(network.centrelines["length_m"].sum()),
+                  "junctions": len(network.junctions)}
+        return {"OUTPUT": out, "CONNECTIONS": kept,
+                **self.network_outputs(result, feedback, f", {kept} junction connections")}

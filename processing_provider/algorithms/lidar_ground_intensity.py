@@ -1,12 +1,11 @@
 """LiDAR stages 1-2: multi-level ground planes and the per-level intensity image."""
 from qgis.core import (QgsProcessingOutputNumber, QgsProcessingOutputRasterLayer,
-                       QgsProcessingParameterFile, QgsProcessingParameterNumber,
-                       QgsProcessingParameterRasterDestination)
+                       QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination)
 
 from gisroads.jobs import ground_intensity_job
 
 from ..convert import gisroads_errors, progress_callback
-from .base import GisroadsAlgorithm
+from .base import GisroadsAlgorithm, cloud_input
 
 
 class LidarGroundIntensity(GisroadsAlgorithm):
@@ -29,9 +28,8 @@ class LidarGroundIntensity(GisroadsAlgorithm):
     def initAlgorithm(self, config=None):  # noqa: N802
         double = QgsProcessingParameterNumber.Double
         params = [
-            (QgsProcessingParameterFile("INPUT", self.tr("Point cloud (LAS/LAZ)"),
-                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)"),
-             "airborne LiDAR with intensity; feet are converted to metres"),
+            (cloud_input(self.tr, "airborne LiDAR with intensity; feet are converted to "
+                                  "metres"), None),
             (QgsProcessingParameterNumber("CELL", self.tr("Image cell (metres)"), double,
                                           None, optional=True, minValue=0.1, maxValue=5.0),
              "empty: 0.5 m as in the paper, or the mean point spacing of a sparser cloud"),
@@ -48,9 +46,7 @@ class LidarGroundIntensity(GisroadsAlgorithm):
                                                      self.tr("Ground heights per level")),
              "GeoTIFF of each level's ground height (for Tag road points)"),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
+        self.add_parameters(params)
         self.addOutput(QgsProcessingOutputRasterLayer("LEVEL_INDEX", self.tr("Level index")))
         self.addOutput(QgsProcessingOutputNumber("LEVELS", self.tr("Ground levels")))
         self.addOutput(QgsProcessingOutputNumber("CELL_M", self.tr("Cell size used (metres)")))

@@ -58,10 +58,7 @@ class LidarLikelihood(GisroadsAlgorithm):
                                                    "GeoPackage (*.gpkg)"),
              "GeoPackage with the valid windows (layer hypotheses)"),
         ]
-        for param, text in params:
-            if text:
-                param.setHelp(self.tr(text))
-            self.addParameter(param)
+        self.add_parameters(params)
         self.addOutput(QgsProcessingOutputNumber("N_HYPOTHESES", self.tr("Valid windows")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802

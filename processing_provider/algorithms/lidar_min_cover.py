@@ -55,9 +55,7 @@ class LidarMinCover(GisroadsAlgorithm):
                                                    "GeoPackage (*.gpkg)"),
              "GeoPackage with the selected rectangles (layer rectangles)"),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
+        self.add_parameters(params)
         self.addOutput(QgsProcessingOutputNumber("N_RECTANGLES", self.tr("Rectangles")))
         self.addOutput(QgsProcessingOutputNumber("COVER_COST", self.tr("Cover cost (Eq. 7)")))
 

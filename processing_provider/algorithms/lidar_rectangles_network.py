@@ -1,13 +1,11 @@
 """LiDAR stage 6: road rectangles to centre lines, road polygons and junctions."""
-from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
-                       QgsProcessingParameterFeatureSource,
-                       QgsProcessingParameterFileDestination)
+from qgis.core import QgsProcessing, QgsProcessingParameterFeatureSource
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import rectangles_network_job
 
 from ..convert import gisroads_errors, load_geopackage_on_completion, source_to_frame
-from .base import GisroadsAlgorithm
+from .base import GisroadsAlgorithm, network_output
 
 
 class RectanglesToNetwork(GisroadsAlgorithm):
@@ -30,16 +28,10 @@ class RectanglesToNetwork(GisroadsAlgorithm):
             (QgsProcessingParameterFeatureSource("INPUT", self.tr("Road rectangles"),
                                                  [QgsProcessing.TypeVectorPolygon]),
              "rectangles with fields width_m and theta_rad"),
-            (QgsProcessingParameterFileDestination("OUTPUT", self.tr("Road network"),
-                                                   "GeoPackage (*.gpkg)"),
-             "GeoPackage receiving the road network layers"),
+            (network_output(self.tr, "GeoPackage receiving the road network layers"), None),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
-        for name, text in (("ROADS", "number of roads"), ("LENGTH_M", "total road length"),
-                           ("JUNCTIONS", "number of junctions")):
-            self.addOutput(QgsProcessingOutputNumber(name, self.tr(text)))
+        self.add_parameters(params)
+        self.add_network_outputs()
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
@@ -49,7 +41,4 @@ class RectanglesToNetwork(GisroadsAlgorithm):
             result = rectangles_network_job(rectangles, out)
         load_geopackage_on_completion(context, out, ("rectangles", POLYGONS, CENTRELINES,
                                                      JUNCTIONS), group="roads")
-        feedback.pushInfo(f"{result['roads']} roads, {result['length_m']:.0f} m, "
-                          f"{result['junctions']} junctions")
-        return {"OUTPUT": out, "ROADS": result["roads"], "LENGTH_M": result["length_m"],
-                "JUNCTIONS": result["junctions"]}
+        return {"OUTPUT": out, **self.network_outputs(result, feedback)}

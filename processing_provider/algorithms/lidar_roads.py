@@ -1,6 +1,5 @@
 """LiDAR road network (Zhu & Mordohai): the whole pipeline from a LAS/LAZ file."""
-from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFile,
-                       QgsProcessingParameterFileDestination,
+from qgis.core import (QgsProcessingParameterFileDestination,
                        QgsProcessingParameterFolderDestination, QgsProcessingParameterNumber,
                        QgsProcessingParameterString)
 
@@ -9,7 +8,7 @@ from gisroads.jobs import lidar_job, parse_metres
 from gisroads.lidar.pipeline import DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M
 
 from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
-from .base import GisroadsAlgorithm
+from .base import GisroadsAlgorithm, cloud_input, network_output
 
 
 class LidarRoadNetwork(GisroadsAlgorithm):
@@ -33,9 +32,8 @@ class LidarRoadNetwork(GisroadsAlgorithm):
         widths = ",".join(f"{w:g}" for w in DEFAULT_WIDTHS_M)
         lengths = ",".join(f"{v:g}" for v in DEFAULT_LENGTHS_M)
         params = [
-            (QgsProcessingParameterFile("INPUT", self.tr("Point cloud (LAS/LAZ)"),
-                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)"),
-             "airborne LiDAR with intensity; feet are converted to metres"),
+            (cloud_input(self.tr, "airborne LiDAR with intensity; feet are converted to "
+                                  "metres"), None),
             (QgsProcessingParameterNumber("CELL", self.tr("Intensity image cell (metres)"),
                                           double, None, optional=True, minValue=0.1,
                                           maxValue=5.0),
@@ -55,9 +53,7 @@ class LidarRoadNetwork(GisroadsAlgorithm):
                                           QgsProcessingParameterNumber.Integer, 150,
                                           minValue=10, maxValue=1000),
              "over-segmentation size (paper: 100-200)"),
-            (QgsProcessingParameterFileDestination("OUTPUT", self.tr("Road network"),
-                                                   "GeoPackage (*.gpkg)"),
-             "GeoPackage receiving every layer, in the cloud's CRS"),
+            (network_output(self.tr, "GeoPackage receiving every layer, in the cloud's CRS"), None),
             (QgsProcessingParameterFileDestination("TAGGED_LAS",
                                                    self.tr("Cloud with road points (class 11)"),
                                                    "LAZ (*.laz);;LAS (*.las)", optional=True,
@@ -67,12 +63,8 @@ class LidarRoadNetwork(GisroadsAlgorithm):
                                                      optional=True, createByDefault=False),
              "optional: intensity, likelihood and ground-height GeoTIFFs for QA"),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
-        for name, text in (("ROADS", "number of roads"), ("LENGTH_M", "total road length"),
-                           ("JUNCTIONS", "number of junctions")):
-            self.addOutput(QgsProcessingOutputNumber(name, self.tr(text)))
+        self.add_parameters(params)
+        self.add_network_outputs()
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
@@ -93,8 +85,5 @@ class LidarRoadNetwork(GisroadsAlgorithm):
                 n_segments=self.parameterAsInt(parameters, "SEGMENTS", context))
         load_geopackage_on_completion(context, out, ("hypotheses", "rectangles", POLYGONS,
                                                      CENTRELINES, JUNCTIONS), group="roads")
-        feedback.pushInfo(f"{result['roads']} roads, {result['length_m']:.0f} m, "
-                          f"{result['junctions']} junctions")
         return {"OUTPUT": out, "TAGGED_LAS": tagged, "RASTERS": rasters,
-                "ROADS": result["roads"], "LENGTH_M": result["length_m"],
-                "JUNCTIONS": result["junctions"]}
+                **self.network_outputs(result, feedback)}

@@ -1,13 +1,13 @@
 """Register road map to point cloud: a 2D road map lifted onto a LAS/LAZ cloud in 3D."""
-from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterFile,
-                       QgsProcessingParameterFeatureSource,
-                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber)
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
+                       QgsProcessingParameterNumber)
 
 from gisroads.jobs import register_job
 
 from ..convert import (gisroads_errors, load_geopackage_on_completion, progress_callback,
                        source_to_frame)
-from .base import GisroadsAlgorithm
+from .base import GisroadsAlgorithm, cloud_input
 
 
 class RegisterRoadMap(GisroadsAlgorithm):
@@ -35,9 +35,8 @@ class RegisterRoadMap(GisroadsAlgorithm):
     def initAlgorithm(self, config=None):  # noqa: N802
         double = QgsProcessingParameterNumber.Double
         params = [
-            (QgsProcessingParameterFile("INPUT", self.tr("Point cloud (LAS/LAZ)"),
-                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)"),
-             "the cloud to register the map on; read chunk by chunk, only along the map"),
+            (cloud_input(self.tr, "the cloud to register the map on; read chunk by chunk, "
+                                  "only along the map"), None),
             (QgsProcessingParameterFeatureSource("MAP", self.tr("Road map lines"),
                                                  [QgsProcessing.TypeVectorLine]),
              "approximate road centre lines in any CRS (reprojected to the cloud's)"),
@@ -61,9 +60,7 @@ class RegisterRoadMap(GisroadsAlgorithm):
                                                    "GeoPackage (*.gpkg)"),
              "GeoPackage receiving the registered_map layer"),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
+        self.add_parameters(params)
         for name, text in (("ROADS", "number of roads"), ("LENGTH_M", "total road length"),
                            ("SEEN_FRACTION", "share of samples seeing the road")):
             self.addOutput(QgsProcessingOutputNumber(name, self.tr(text)))

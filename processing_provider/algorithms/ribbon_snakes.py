@@ -1,7 +1,5 @@
 """Ribbon-snake road boundaries: the whole map-guided pipeline (Boyko & Funkhouser)."""
-from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterEnum,
-                       QgsProcessingParameterFile, QgsProcessingParameterFeatureSource,
-                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
+from qgis.core import (QgsProcessingParameterFileDestination,
                        QgsProcessingParameterRasterDestination)
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
@@ -9,8 +7,8 @@ from gisroads.jobs import snakes_job
 
 from ..convert import (gisroads_errors, load_geopackage_on_completion, progress_callback,
                        source_to_frame)
-from .base import GisroadsAlgorithm
-from .curb_attractor import DETECTORS
+from .base import GisroadsAlgorithm, network_output
+from .curb_attractor import DETECTORS, map_guided_parameters
 
 
 class RibbonSnakeRoads(GisroadsAlgorithm):
@@ -33,29 +31,10 @@ class RibbonSnakeRoads(GisroadsAlgorithm):
         "their own level, classified 11, and the attractor map as a GeoTIFF.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        params = [
-            (QgsProcessingParameterFile("INPUT", self.tr("Point cloud (LAS/LAZ)"),
-                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)"),
-             "the cloud; read chunk by chunk, only along the map"),
-            (QgsProcessingParameterFeatureSource("MAP", self.tr("Road map lines"),
-                                                 [QgsProcessing.TypeVectorLine]),
-             "approximate road centre lines in any CRS (reprojected to the cloud's)"),
-            (QgsProcessingParameterEnum("DETECTOR", self.tr("Curb detector"),
-                                        options=["exp: Gaussian, 15 cm mean (paper's best)",
-                                                 "step: 10-20 cm", "none: normals only"],
-                                        defaultValue=0),
-             "how the height step of a neighbourhood weights its normal's tilt"),
-            (QgsProcessingParameterNumber("CELL", self.tr("Attractor cell (metres)"),
-                                          QgsProcessingParameterNumber.Double, 0.5,
-                                          minValue=0.1, maxValue=5.0),
-             "cell of the attractor map the snakes fit to"),
-            (QgsProcessingParameterNumber("SNAP", self.tr("Intersection snapping (metres)"),
-                                          QgsProcessingParameterNumber.Double, 2.0,
-                                          minValue=0.01, maxValue=50.0),
-             "map line ends closer than this are one intersection"),
-            (QgsProcessingParameterFileDestination("OUTPUT", self.tr("Road network"),
-                                                   "GeoPackage (*.gpkg)"),
-             "GeoPackage receiving every layer, in the cloud's CRS"),
+        params = map_guided_parameters(self.tr,
+                                       "cell of the attractor map the snakes fit to") + [
+            (network_output(self.tr, "GeoPackage receiving every layer, in the cloud's CRS"),
+             None),
             (QgsProcessingParameterFileDestination("TAGGED_LAS",
                                                    self.tr("Cloud with road points (class 11)"),
                                                    "LAZ (*.laz);;LAS (*.las)", optional=True,
@@ -65,12 +44,8 @@ class RibbonSnakeRoads(GisroadsAlgorithm):
                                                      optional=True, createByDefault=False),
              "optional: the attractor maps of the road patches as one GeoTIFF, for QA"),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
-        for name, text in (("ROADS", "number of roads"), ("LENGTH_M", "total road length"),
-                           ("JUNCTIONS", "number of junctions")):
-            self.addOutput(QgsProcessingOutputNumber(name, self.tr(text)))
+        self.add_parameters(params)
+        self.add_network_outputs()
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
@@ -87,9 +62,6 @@ class RibbonSnakeRoads(GisroadsAlgorithm):
                 progress=progress_callback(feedback))
         load_geopackage_on_completion(context, out, ("ribbon_patches", POLYGONS, CENTRELINES,
                                                      JUNCTIONS), group="roads")
-        feedback.pushInfo(f"{result['roads']} roads, {result['length_m']:.0f} m, "
-                          f"{result['junctions']} junctions, {result['converged']} of "
-                          f"{result['patches']} ribbons converged")
         return {"OUTPUT": out, "TAGGED_LAS": tagged, "ATTRACTOR": attractor,
-                "ROADS": result["roads"], "LENGTH_M": result["length_m"],
-                "JUNCTIONS": result["junctions"]}
+                **self.network_outputs(result, feedback, f", {result['converged']} of "
+                                       f"{result['patches']} ribbons converged")}

@@ -133,9 +133,7 @@ class RoadPartFiltering(GisroadsAlgorithm):
              "centre lines of the road parts: part_id, segment_id, width_m, length_m, "
              "quality, band means"),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
+        self.add_parameters(params)
         self.addOutput(QgsProcessingOutputNumber("PARTS", self.tr("Road parts found")))
         self.addOutput(QgsProcessingOutputString("CUES", self.tr("Cues used")))
 

@@ -90,9 +90,7 @@ class SegmentGrouping(GisroadsAlgorithm):
         params.append((QgsProcessingParameterFeatureSink("OUTPUT", self.tr("Grouped segments"),
                                                          QgsProcessing.TypeVectorPolygon),
                        "grouped segment polygons with segment_id and area_px"))
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
+        self.add_parameters(params)
         self.addOutput(QgsProcessingOutputNumber("SEGMENTS", self.tr("Segments after "
                                                                      "grouping")))
 

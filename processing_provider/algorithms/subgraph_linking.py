@@ -96,9 +96,7 @@ class SubgraphLinking(GisroadsAlgorithm):
                                                QgsProcessing.TypeVectorLine),
              "road parts chained through the selected gap edges"),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
+        self.add_parameters(params)
         self.addOutput(QgsProcessingOutputNumber("SELECTED", self.tr("Gap edges kept")))
         self.addOutput(QgsProcessingOutputNumber("STRINGS", self.tr("Road strings")))
 

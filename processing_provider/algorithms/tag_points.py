@@ -5,7 +5,7 @@ from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFile,
 from gisroads.jobs import tag_job
 
 from ..convert import gisroads_errors
-from .base import GisroadsAlgorithm
+from .base import GisroadsAlgorithm, cloud_input
 
 
 class TagRoadPoints(GisroadsAlgorithm):
@@ -26,9 +26,7 @@ class TagRoadPoints(GisroadsAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         params = [
-            (QgsProcessingParameterFile("INPUT", self.tr("Point cloud (LAS/LAZ)"),
-                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)"),
-             "the cloud the road network was extracted from"),
+            (cloud_input(self.tr, "the cloud the road network was extracted from"), None),
             (QgsProcessingParameterFile("POLYGONS", self.tr("Road polygons"),
                                         fileFilter="Vector (*.gpkg *.geojson *.shp)"),
              "a gisroads GeoPackage (its road_polygons layer) or any polygon file with "
@@ -45,9 +43,7 @@ class TagRoadPoints(GisroadsAlgorithm):
                                                    "LAZ (*.laz);;LAS (*.las)"),
              "the copy with road points in class 11"),
         ]
-        for param, text in params:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
+        self.add_parameters(params)
         self.addOutput(QgsProcessingOutputNumber("TAGGED", self.tr("Road points tagged")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
