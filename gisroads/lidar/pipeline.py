@@ -14,7 +14,6 @@ import geopandas as gpd
 import numpy as np
 import pandas as pd
 import shapely
-from affine import Affine
 
 from ..features.edges import local_energy
 from ..geo import GeoRaster, RoadNetwork
