@@ -186,6 +186,35 @@ def excess_green(image: GeoRaster, bands=(1, 2, 3)) -> np.ndarray:
     return index
 
 
+def saturation(image: GeoRaster, bands=(1, 2, 3)) -> np.ndarray:
+    """HSV saturation ``(max - min) / max`` of three bands in [0, 1]: the road-surface colour
+    cue of an RGB image. Asphalt, concrete and gravel are grey (about 0.1 and below), soil,
+    tiles, coloured roofs and vegetation are not.
+
+    Computed on the raw values, like :func:`excess_green` (a ratio: a common scale cancels;
+    a per-band stretch would turn the grey of a scene with few colours into a colour).
+
+    Parameters
+    ----------
+    image : GeoRaster
+    bands : (int, int, int)
+        1-based band numbers.
+
+    Returns
+    -------
+    ndarray of float32, shape ``(rows, cols)``; NaN where the image has no data, 0 where
+    it is black.
+    """
+    data = _bands(image)
+    rgb = np.stack([data[_check_band(b, len(data), "colour") - 1].astype(np.float32)
+                    for b in bands])
+    top = rgb.max(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        value = np.where(top > 0, (top - rgb.min(axis=0)) / top, 0.0).astype(np.float32)
+    value[~valid_mask(image)] = np.nan
+    return value
+
+
 def resample_to(raster: GeoRaster, like: GeoRaster, *, order: int = 1) -> np.ndarray:
     """A single-band raster sampled at the pixel centres of another raster's grid.
 
@@ -319,6 +348,8 @@ class ImageCues:
     exg : ndarray or None
         :func:`excess_green` of bands 1-3, for ``"rgb"`` images (the vegetation cue when
         there is no NIR band).
+    saturation : ndarray or None
+        :func:`saturation` of bands 1-3, for the same images as ``exg``.
     """
 
     bands: np.ndarray
@@ -328,6 +359,7 @@ class ImageCues:
     kind: str
     nir_band: int | None = None
     exg: np.ndarray | None = None
+    saturation: np.ndarray | None = None
 
     def record(self) -> dict:
         """What a run used (see :func:`cues_used`)."""
@@ -391,4 +423,5 @@ def image_cues(image: GeoRaster, *, nir_band: int | None = None,
         ndvi=None if nir_band is None else ndvi(image, nir_band, red_band),
         ndsm=None if dsm is None else normalised_dsm(dsm, image, window_m=ground_window_m),
         kind=kind, nir_band=nir_band,
-        exg=excess_green(image) if kind == "rgb" and nir_band not in (1, 2, 3) else None)
+        **(dict(exg=excess_green(image), saturation=saturation(image))
+           if kind == "rgb" and nir_band not in (1, 2, 3) else {}))

@@ -48,6 +48,11 @@ THRESHOLDS = {
                          ("excess_green_max", None),
                          "mean (2G - R - B) / (R + G + B): the vegetation test of RGB images "
                          "without a NIR band; lawns and trees are above 0.1"),
+    "MAX_SATURATION": ("Largest colour saturation (RGB without NIR)",
+                       ("saturation_max", None),
+                       "mean HSV saturation (max - min) / max of bands 1-3: roads are grey "
+                       "(about 0.1), soil, tiles, coloured roofs and leaf-off forest are "
+                       "not; 1 turns the test off"),
     "MIN_INTENSITY": ("Smallest intensity (0-1)", ("intensity_range", 0),
                       "darker segments are shadows; intensity is the mean of the bands "
                       "stretched between their 1st and 99th percentiles"),
@@ -79,7 +84,8 @@ class RoadPartFiltering(GisroadsAlgorithm):
         "within a road-width range and nearly constant along the centre line; a minimum "
         "length. <b>Radiometry</b>: intensity neither very low (shadow) nor very high, low "
         "intensity standard deviation, low NDVI when a NIR band is given (else, for RGB, a "
-        "low excess green), low height above ground when a DSM is given. Adjacent road "
+        "low excess green and a low colour saturation: roads are grey), low height above "
+        "ground when a DSM is given. Adjacent road "
         "parts with similar directions are merged when the merged region still passes. "
         "Each part gets a quality in 0-1 from its "
         "elongation, width, width constancy, length and NDVI.</p>"

@@ -4,7 +4,8 @@ from affine import Affine
 
 from gisroads.geo import GeoRaster
 from gisroads.imagery.cues import (cues_used, excess_green, ground_surface, image_cues,
-                                   intensity, ndvi, normalised_dsm, resample_to, scale_bands)
+                                   intensity, ndvi, normalised_dsm, resample_to, saturation,
+                                   scale_bands)
 
 CRS = "EPSG:32633"
 T = Affine(0.5, 0, 500000.0, 0, -0.5, 4500100.0)
@@ -73,6 +74,19 @@ def test_excess_green_exact_values_and_scale_invariance():
     np.testing.assert_allclose(sixteen, index, rtol=1e-6)
     with pytest.raises(ValueError, match="blue band 3 does not exist"):
         excess_green(GeoRaster(rgb[:2], T, CRS))
+
+
+def test_saturation_exact_values_scale_invariance_and_only_for_rgb():
+    rgb = np.array([[[80, 86, 200]], [[112, 88, 40]], [[52, 91, 40]]], np.uint8)
+    value = saturation(GeoRaster(rgb, T, CRS))  # grass, asphalt, a red roof
+    np.testing.assert_allclose(value[0], [60 / 112, 5 / 91, 160 / 200], rtol=1e-6)
+    sixteen = saturation(GeoRaster(rgb.astype(np.uint16) * 257, T, CRS))
+    np.testing.assert_allclose(sixteen, value, rtol=1e-5)
+    np.testing.assert_array_equal(image_cues(GeoRaster(rgb, T, CRS)).saturation, value)
+    assert image_cues(GeoRaster(rgb, T, CRS), nir_band=1).saturation is None
+    assert image_cues(GeoRaster(rgb[0], T, CRS)).saturation is None
+    with pytest.raises(ValueError, match="band 3 does not exist"):
+        saturation(GeoRaster(rgb[:2], T, CRS))
 
 
 def test_ground_surface_removes_buildings_and_keeps_slopes_and_plateaus():

@@ -97,7 +97,7 @@ def test_parking_lot_fails_and_names_the_test():
     assert _row(loose, 2).reason == "too wide"
 
 
-def test_roof_strip_fails_only_with_a_dsm():
+def test_roof_strip_fails_on_its_height_or_colour():
     _, strip = _strip(75, 75, 8.0, 100.0, 0.0)
     labels, image = _paint([(strip, ROOF)], background=ASPHALT)
     dsm = np.zeros(SHAPE, np.float32)
@@ -107,8 +107,12 @@ def test_roof_strip_fails_only_with_a_dsm():
     assert _row(with_dsm.segments, 1).height_m == pytest.approx(6.0, abs=0.01)
     assert len(with_dsm.road_parts) == 0 and with_dsm.cues["cues"] == "rgb+dsm"
     without = extract_road_parts(labels, image)
-    assert _row(without.segments, 1).passed and without.cues["cues"] == "rgb"
+    assert _row(without.segments, 1).reason == "coloured" and without.cues["cues"] == "rgb"
+    assert _row(without.segments, 1).saturation == pytest.approx(0.53, abs=0.03)
     assert np.isnan(_row(without.segments, 1).height_m)
+    # a grey roof: only the DSM tells it from a road
+    grey = extract_road_parts(labels, image, saturation_max=1.0)
+    assert _row(grey.segments, 1).passed
 
 
 def test_grass_strip_fails_on_ndvi_or_excess_green_and_passes_without_colour():
@@ -129,7 +133,7 @@ def test_grass_strip_fails_on_ndvi_or_excess_green_and_passes_without_colour():
     assert _row(pan.segments, 1).passed and pan.cues["cues"] == "pan"
     assert np.isnan(_row(pan.segments, 1).excess_green)
     loose = extract_road_parts(labels, GeoRaster(image.data[:3], T, CRS),
-                               excess_green_max=0.5)
+                               excess_green_max=0.5, saturation_max=1.0)
     assert _row(loose.segments, 1).passed
 
 
