@@ -10,13 +10,17 @@ from .vector import atomic_path
 
 
 def _display_rgb(raster: GeoRaster) -> np.ndarray:
-    """(rows, cols, 3) floats in [0, 1], each band stretched between its 2nd-98th percentile."""
+    """(rows, cols, 4) RGBA floats in [0, 1], each band stretched between its 2nd-98th
+    percentile; cells without data (NaN) transparent, whatever matplotlib's version makes
+    of NaN colours."""
     data = raster.data if raster.data.ndim == 3 else raster.data[np.newaxis]
     bands = data[:3] if len(data) >= 3 else np.repeat(data[:1], 3, axis=0)
     bands = bands.astype(float)
     lo = np.nanpercentile(bands, 2, axis=(1, 2), keepdims=True)
     hi = np.nanpercentile(bands, 98, axis=(1, 2), keepdims=True)
-    return np.clip((bands - lo) / np.maximum(hi - lo, 1e-9), 0, 1).transpose(1, 2, 0)
+    rgb = np.clip((bands - lo) / np.maximum(hi - lo, 1e-9), 0, 1)
+    valid = np.isfinite(rgb).all(axis=0)
+    return np.concatenate([np.nan_to_num(rgb), valid[np.newaxis]]).transpose(1, 2, 0)
 
 
 def write_quicklook(path, layers, *, background: GeoRaster | None = None, title: str = "",
