@@ -1,17 +1,15 @@
 """NCut segmentation (imagery): an aerial image over-segmented into polygons (Grote &
 Rottensteiner 2010, Sec. 2.1.1)."""
-import geopandas as gpd
-import shapely
-from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterBand,
-                       QgsProcessingParameterFeatureSink, QgsProcessingParameterNumber,
-                       QgsProcessingParameterRasterLayer)
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
+                       QgsProcessingParameterFeatureSink, QgsProcessingParameterNumber)
 
 from gisroads.imagery.segments import (NDVI_THRESHOLD, SEGMENT_AREA_M2, SUPERPIXEL_AREA_M2,
                                        W_NDVI, segment_image, segments_to_frame)
-from gisroads.io.raster import read_raster
 
-from ..convert import frame_to_sink, gisroads_errors, progress_callback, style_on_load
+from ..convert import gisroads_errors, progress_callback
 from .base import GisroadsAlgorithm
+from .imagery_inputs import (IMAGE_HELP, RED_BAND_HELP, band_options, imagery_parameters,
+                             read_raster_input, write_segments)
 
 
 class ImageSegmentation(GisroadsAlgorithm):
@@ -36,15 +34,10 @@ class ImageSegmentation(GisroadsAlgorithm):
     def initAlgorithm(self, config=None):  # noqa: N802
         double = QgsProcessingParameterNumber.Double
         integer = QgsProcessingParameterNumber.Integer
-        params = [
-            (QgsProcessingParameterRasterLayer("IMAGE", self.tr("Image")),
-             "RGB, CIR or panchromatic image (8 or 16 bit) in a projected CRS in metres"),
-            (QgsProcessingParameterBand("NIR_BAND", self.tr("Near-infrared band"), None,
-                                        "IMAGE", optional=True),
-             "optional: enables the NDVI factor (vegetation / non-vegetation borders)"),
-            (QgsProcessingParameterBand("RED_BAND", self.tr("Red band"), None, "IMAGE",
-                                        optional=True),
-             "red band for the NDVI; by default band 2 when NIR is band 1 (CIR), else 1"),
+        params = imagery_parameters(
+            self.tr, image=IMAGE_HELP, red_band=RED_BAND_HELP,
+            nir_band="optional: enables the NDVI factor (vegetation / non-vegetation borders)"
+        ) + [
             (QgsProcessingParameterNumber("N_SEGMENTS", self.tr("Number of segments (0: auto)"),
                                           integer, 0, minValue=0),
              f"target over-segmentation size; 0: one segment per {SEGMENT_AREA_M2:g} m2 of "
@@ -69,13 +62,10 @@ class ImageSegmentation(GisroadsAlgorithm):
         self.addOutput(QgsProcessingOutputNumber("SEGMENTS", self.tr("Segments made")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        image_layer = self.parameterAsRasterLayer(parameters, "IMAGE", context)
-        nir = self.parameterAsInt(parameters, "NIR_BAND", context) or None
-        red = self.parameterAsInt(parameters, "RED_BAND", context) or None
         with gisroads_errors():
-            image = read_raster(image_layer.source())
+            image = read_raster_input(self, parameters, "IMAGE", context)
             labels = segment_image(
-                image, nir_band=nir, red_band=red,
+                image, **band_options(self, parameters, context),
                 n_segments=self.parameterAsInt(parameters, "N_SEGMENTS", context) or None,
                 n_superpixels=self.parameterAsInt(parameters, "N_SUPERPIXELS", context) or None,
                 ndvi_threshold=self.parameterAsDouble(parameters, "NDVI_THRESHOLD", context),
@@ -86,13 +76,3 @@ class ImageSegmentation(GisroadsAlgorithm):
         feedback.pushInfo(f"{len(frame)} segments")
         return {"OUTPUT": output, "SEGMENTS": len(frame)}
 
-
-def write_segments(algorithm, parameters, name, context, frame, feedback) -> str:
-    """Segments into a polygon sink (one MultiPolygon type for all), styled as segments."""
-    parts, owner = shapely.get_parts(frame.geometry.values, return_index=True)
-    frame = frame.set_geometry(gpd.GeoSeries(shapely.multipolygons(parts, indices=owner),
-                                             index=frame.index, crs=frame.crs))
-    output = frame_to_sink(algorithm, parameters, name, context, frame, "MultiPolygon",
-                           feedback)
-    style_on_load(context, output, "segments")
-    return output

@@ -1,12 +1,12 @@
 """Imagery road network (Grote & Rottensteiner): the whole pipeline from an aerial image."""
-from qgis.core import (QgsProcessingOutputString, QgsProcessingParameterBand,
-                       QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer)
+from qgis.core import QgsProcessingOutputString, QgsProcessingParameterNumber
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import image_job
 
 from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
 from .base import GisroadsAlgorithm, network_output
+from .imagery_inputs import band_options, imagery_parameters
 
 
 class ImageryRoadNetwork(GisroadsAlgorithm):
@@ -30,22 +30,17 @@ class ImageryRoadNetwork(GisroadsAlgorithm):
         "algorithms of this group run the same steps one at a time.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        params = [
-            (QgsProcessingParameterRasterLayer("INPUT", self.tr("Aerial image")),
-             "RGB, CIR or panchromatic image in a projected CRS (metres); a geographic "
-             "image is warped to its UTM zone"),
-            (QgsProcessingParameterBand("NIR_BAND", self.tr("Near-infrared band"), None,
-                                        "INPUT", optional=True),
-             "optional: the NIR band; enables NDVI in the segmentation, the road-part test "
-             "and the gap context"),
-            (QgsProcessingParameterBand("RED_BAND", self.tr("Red band"), None, "INPUT",
-                                        optional=True),
-             "optional, with a NIR band: the red band for NDVI (default band 1, or 2 in a "
-             "three-band CIR image)"),
-            (QgsProcessingParameterRasterLayer("DSM", self.tr("Surface model (DSM)"),
-                                               optional=True),
-             "optional: heights in metres; enables the height criteria and buildings as "
-             "gap context"),
+        params = imagery_parameters(
+            self.tr, image_name="INPUT", image_label="Aerial image",
+            image="RGB, CIR or panchromatic image in a projected CRS (metres); a geographic "
+                  "image is warped to its UTM zone",
+            nir_band="optional: the NIR band; enables NDVI in the segmentation, the road-part "
+                     "test and the gap context",
+            red_band="optional, with a NIR band: the red band for NDVI (default band 1, or 2 "
+                     "in a three-band CIR image)",
+            dsm_label="Surface model (DSM)",
+            dsm="optional: heights in metres; enables the height criteria and buildings as "
+                "gap context") + [
             (QgsProcessingParameterNumber("SEGMENTS", self.tr("NCut segments"),
                                           QgsProcessingParameterNumber.Integer, None,
                                           optional=True, minValue=10, maxValue=5000),
@@ -65,8 +60,7 @@ class ImageryRoadNetwork(GisroadsAlgorithm):
         with gisroads_errors():
             result = image_job(
                 self.parameterAsRasterLayer(parameters, "INPUT", context).source(), out,
-                nir_band=self.parameterAsInt(parameters, "NIR_BAND", context) or None,
-                red_band=self.parameterAsInt(parameters, "RED_BAND", context) or None,
+                **band_options(self, parameters, context),
                 dsm_path=dsm.source() if dsm is not None else None,
                 progress=progress_callback(feedback), **options)
         load_geopackage_on_completion(context, out, (

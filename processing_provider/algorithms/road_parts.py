@@ -1,20 +1,16 @@
 """Road-part shape filtering (Grote & Rottensteiner): segments in, road-part centre lines out."""
-import geopandas as gpd
 import numpy as np
-import shapely
-from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutputNumber,
-                       QgsProcessingOutputString, QgsProcessingParameterBand,
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingOutputString,
                        QgsProcessingParameterBoolean, QgsProcessingParameterFeatureSink,
-                       QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
-                       QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer)
+                       QgsProcessingParameterNumber)
 
 from gisroads.imagery.cues import image_cues
 from gisroads.imagery.roadparts import CRITERIA, extract_road_parts, rasterize_segments
-from gisroads.io.raster import read_raster
 
-from ..convert import (frame_to_sink, gisroads_errors, progress_callback, source_to_frame,
-                       style_on_load)
+from ..convert import frame_to_sink, gisroads_errors, progress_callback, style_on_load
 from .base import GisroadsAlgorithm
+from .imagery_inputs import (IMAGE_HELP, RED_BAND_HELP, band_options, imagery_parameters,
+                             read_segment_labels, write_segments)
 
 # parameter: (label, criteria key and index for (min, max) pairs, help)
 THRESHOLDS = {
@@ -98,26 +94,13 @@ class RoadPartFiltering(GisroadsAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         double = QgsProcessingParameterNumber.Double
-        params = [
-            (QgsProcessingParameterRasterLayer("IMAGE", self.tr("Image")),
-             "RGB, CIR or panchromatic image (8 or 16 bit) in a projected CRS in metres"),
-            (QgsProcessingParameterFeatureSource("SEGMENTS", self.tr("Segments"),
-                                                 [QgsProcessing.TypeVectorPolygon]),
-             "segment polygons in the image's CRS, e.g. from segment grouping"),
-            (QgsProcessingParameterField("ID_FIELD", self.tr("Segment id field"),
-                                         "segment_id", "SEGMENTS",
-                                         QgsProcessingParameterField.Numeric, optional=True),
-             "non-negative integer id of each segment (segment_id when empty); polygons "
-             "with the same id are one segment"),
-            (QgsProcessingParameterBand("NIR_BAND", self.tr("Near-infrared band"), None,
-                                        "IMAGE", optional=True),
-             "optional: adds the NDVI test and leaves NIR out of the intensity"),
-            (QgsProcessingParameterBand("RED_BAND", self.tr("Red band"), None, "IMAGE",
-                                        optional=True),
-             "red band for the NDVI; by default band 2 when NIR is band 1 (CIR), else 1"),
-            (QgsProcessingParameterRasterLayer("DSM", self.tr("DSM"), optional=True),
-             "optional: surface heights in metres; adds the height test (normalised DSM)"),
-        ]
+        params = imagery_parameters(
+            self.tr, image=IMAGE_HELP, red_band=RED_BAND_HELP,
+            segments="segment polygons in the image's CRS, e.g. from segment grouping",
+            id_field="non-negative integer id of each segment (segment_id when empty); "
+                     "polygons with the same id are one segment",
+            nir_band="optional: adds the NDVI test and leaves NIR out of the intensity",
+            dsm="optional: surface heights in metres; adds the height test (normalised DSM)")
         for name, (label, (key, index), text) in THRESHOLDS.items():
             params.append((QgsProcessingParameterNumber(
                 name, self.tr(label), double, _default(key, index),
@@ -154,40 +137,22 @@ class RoadPartFiltering(GisroadsAlgorithm):
         return {k: tuple(v) if isinstance(v, list) else v for k, v in criteria.items()}
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        image_layer = self.parameterAsRasterLayer(parameters, "IMAGE", context)
-        dsm_layer = self.parameterAsRasterLayer(parameters, "DSM", context)
-        segments = source_to_frame(self.parameterAsSource(parameters, "SEGMENTS", context),
-                                   feedback)
-        id_field = (self.parameterAsFields(parameters, "ID_FIELD", context)
-                    or ["segment_id"])[0]
-        nir = self.parameterAsInt(parameters, "NIR_BAND", context) or None
-        red = self.parameterAsInt(parameters, "RED_BAND", context) or None
+        image, dsm, labels = read_segment_labels(self, parameters, context, feedback,
+                                                 rasterize_segments)
         with gisroads_errors():
-            image = read_raster(image_layer.source())
-            dsm = None if dsm_layer is None else read_raster(dsm_layer.source())
-            labels = rasterize_segments(segments, image, id_column=id_field)
-            if (labels < 0).all():
-                raise QgsProcessingException(self.tr("no segment polygon overlaps the image"))
             feedback.setProgressText(self.tr("image cues"))
-            cues = image_cues(image, nir_band=nir, red_band=red, dsm=dsm)
+            cues = image_cues(image, **band_options(self, parameters, context), dsm=dsm)
             result = extract_road_parts(
                 labels, image, cues=cues,
                 merge=self.parameterAsBoolean(parameters, "MERGE", context),
                 max_direction_diff_rad=np.radians(
                     self.parameterAsDouble(parameters, "MAX_DIRECTION", context)),
                 progress=progress_callback(feedback), **self._criteria(parameters, context))
-        tested = result.segments.copy()
-        # one geometry type for the sink: pieces of a segment are a MultiPolygon anyway
-        parts, owner = shapely.get_parts(tested.geometry.values, return_index=True)
-        tested = tested.set_geometry(gpd.GeoSeries(shapely.multipolygons(parts, indices=owner),
-                                                   index=tested.index, crs=tested.crs))
-        outputs = {}
-        for param, layer, frame, kind in (
-                ("OUTPUT_SEGMENTS", "segments", tested, "MultiPolygon"),
-                ("ROAD_PARTS", "road_parts", result.road_parts, "LineString")):
-            outputs[param] = frame_to_sink(self, parameters, param, context, frame, kind,
-                                           feedback)
-            style_on_load(context, outputs[param], layer)
+        outputs = {"OUTPUT_SEGMENTS": write_segments(self, parameters, "OUTPUT_SEGMENTS",
+                                                     context, result.segments, feedback),
+                   "ROAD_PARTS": frame_to_sink(self, parameters, "ROAD_PARTS", context,
+                                               result.road_parts, "LineString", feedback)}
+        style_on_load(context, outputs["ROAD_PARTS"], "road_parts")
         passed = int(result.segments["passed"].sum())
         feedback.pushInfo(f"{passed} road parts among {len(result.segments)} segments; "
                           f"cues: {result.cues['cues']}")

@@ -1,18 +1,14 @@
 """Segment grouping: adjacent segments merged with Grote & Rottensteiner's criteria and fuzzy
 rules (2010, Sec. 2.1.2), junction-spanning segments split."""
-from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutputNumber,
-                       QgsProcessingParameterBand, QgsProcessingParameterBoolean,
-                       QgsProcessingParameterFeatureSink, QgsProcessingParameterFeatureSource,
-                       QgsProcessingParameterField, QgsProcessingParameterNumber,
-                       QgsProcessingParameterRasterLayer)
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterBoolean,
+                       QgsProcessingParameterFeatureSink, QgsProcessingParameterNumber)
 
 from gisroads.imagery.segments import frame_to_labels, segments_to_frame
-from gisroads.io.raster import read_raster
 from gisroads.segmentation.grouping import CRITERIA, MIN_BRANCH_M, group_segments
 
-from ..convert import gisroads_errors, progress_callback, source_to_frame
+from ..convert import gisroads_errors, progress_callback
 from .base import GisroadsAlgorithm
-from .image_segmentation import write_segments
+from .imagery_inputs import band_options, imagery_parameters, read_segment_labels, write_segments
 
 # criterion: (label, help); each gets a "poor" and a "very good" limit parameter
 LIMITS = {
@@ -50,21 +46,12 @@ class SegmentGrouping(GisroadsAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         double = QgsProcessingParameterNumber.Double
-        params = [
-            (QgsProcessingParameterRasterLayer("IMAGE", self.tr("Image")),
-             "the image the segments were made from (RGB, CIR or panchromatic)"),
-            (QgsProcessingParameterFeatureSource("SEGMENTS", self.tr("Segments"),
-                                                 [QgsProcessing.TypeVectorPolygon]),
-             "segment polygons in the image's CRS"),
-            (QgsProcessingParameterField("ID_FIELD", self.tr("Segment id field"),
-                                         "segment_id", "SEGMENTS",
-                                         QgsProcessingParameterField.Numeric, optional=True),
-             "non-negative integer id of each segment (segment_id when empty)"),
-            (QgsProcessingParameterBand("NIR_BAND", self.tr("Near-infrared band"), None,
-                                        "IMAGE", optional=True),
-             "optional: adds the NDVI criterion and leaves NIR out of the edges"),
-            (QgsProcessingParameterRasterLayer("DSM", self.tr("DSM"), optional=True),
-             "optional: surface heights in metres; adds the height criterion"),
+        params = imagery_parameters(
+            self.tr, image="the image the segments were made from (RGB, CIR or panchromatic)",
+            segments="segment polygons in the image's CRS",
+            id_field="non-negative integer id of each segment (segment_id when empty)",
+            nir_band="optional: adds the NDVI criterion and leaves NIR out of the edges",
+            dsm="optional: surface heights in metres; adds the height criterion") + [
             (QgsProcessingParameterNumber("MERGE_FRACTION",
                                           self.tr("Share of candidates merged per iteration"),
                                           double, 0.1, minValue=0.001, maxValue=1.0),
@@ -95,24 +82,14 @@ class SegmentGrouping(GisroadsAlgorithm):
                                                                      "grouping")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        image_layer = self.parameterAsRasterLayer(parameters, "IMAGE", context)
-        dsm_layer = self.parameterAsRasterLayer(parameters, "DSM", context)
-        segments = source_to_frame(self.parameterAsSource(parameters, "SEGMENTS", context),
-                                   feedback)
-        id_field = (self.parameterAsFields(parameters, "ID_FIELD", context)
-                    or ["segment_id"])[0]
-        nir = self.parameterAsInt(parameters, "NIR_BAND", context) or None
+        image, dsm, labels = read_segment_labels(self, parameters, context, feedback,
+                                                 frame_to_labels)
         criteria = {c: (self.parameterAsDouble(parameters, f"{c.upper()}_POOR", context),
                         self.parameterAsDouble(parameters, f"{c.upper()}_GOOD", context))
                     for c in LIMITS}
         with gisroads_errors():
-            image = read_raster(image_layer.source())
-            dsm = None if dsm_layer is None else read_raster(dsm_layer.source())
-            labels = frame_to_labels(segments, image, id_column=id_field)
-            if (labels < 0).all():
-                raise QgsProcessingException(self.tr("no segment polygon overlaps the image"))
             grouped = group_segments(
-                labels, image, dsm=dsm, nir_band=nir,
+                labels, image, dsm=dsm, **band_options(self, parameters, context),
                 merge_fraction=self.parameterAsDouble(parameters, "MERGE_FRACTION", context),
                 max_iterations=self.parameterAsInt(parameters, "MAX_ITERATIONS", context),
                 criteria=criteria,

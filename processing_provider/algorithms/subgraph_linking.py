@@ -1,19 +1,18 @@
 """Subgraph linking (integer program): gap hypotheses between road parts, the best kept."""
 import numpy as np
 from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutputNumber,
-                       QgsProcessingParameterBand, QgsProcessingParameterFeatureSink,
-                       QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber,
-                       QgsProcessingParameterRasterLayer)
+                       QgsProcessingParameterFeatureSink, QgsProcessingParameterFeatureSource,
+                       QgsProcessingParameterNumber)
 
 from gisroads.imagery.cues import image_cues, normalised_dsm
 from gisroads.imagery.subgraph import (MAX_DIRECTION_DIFF_RAD, MAX_GAP_M, MAX_GAP_RELATIVE,
                                        MAX_LATERAL_OFFSET_M, MAX_OVERLAP_M, SMALL_GAP_M,
                                        context_rasters, link_road_parts, road_strings)
-from gisroads.io.raster import read_raster
 
 from ..convert import (frame_to_sink, gisroads_errors, progress_callback, source_to_frame,
                        style_on_load)
 from .base import GisroadsAlgorithm
+from .imagery_inputs import band_options, imagery_parameters, read_raster_input
 
 
 class SubgraphLinking(GisroadsAlgorithm):
@@ -53,17 +52,14 @@ class SubgraphLinking(GisroadsAlgorithm):
                                                  [QgsProcessing.TypeVectorLine], optional=True),
              "optional: a gap_edges layer of an earlier run with selected edited by hand; "
              "when given, the road strings follow it and nothing is recomputed"),
-            (QgsProcessingParameterRasterLayer("IMAGE", self.tr("Image (context)"),
-                                               optional=True),
-             "optional: the image the parts come from, for shadow, asphalt and (RGB) "
-             "vegetation in the gaps"),
-            (QgsProcessingParameterBand("NIR_BAND", self.tr("Near-infrared band"), None,
-                                        "IMAGE", optional=True),
-             "optional: the image's NIR band; vegetation then comes from the NDVI"),
-            (QgsProcessingParameterRasterLayer("DSM", self.tr("DSM (context)"),
-                                               optional=True),
-             "optional: surface heights in metres; buildings, vehicles and trees in the gaps "
-             "are found in its normalised heights"),
+        ] + imagery_parameters(
+            self.tr, image_label="Image (context)", image_optional=True,
+            image="optional: the image the parts come from, for shadow, asphalt and (RGB) "
+                  "vegetation in the gaps",
+            nir_band="optional: the image's NIR band; vegetation then comes from the NDVI",
+            dsm_label="DSM (context)",
+            dsm="optional: surface heights in metres; buildings, vehicles and trees in the "
+                "gaps are found in its normalised heights") + [
             (QgsProcessingParameterNumber("MAX_GAP", self.tr("Largest gap (metres)"), double,
                                           MAX_GAP_M, minValue=0.0),
              "part ends further apart are never linked"),
@@ -100,14 +96,10 @@ class SubgraphLinking(GisroadsAlgorithm):
         self.addOutput(QgsProcessingOutputNumber("SELECTED", self.tr("Gap edges kept")))
         self.addOutput(QgsProcessingOutputNumber("STRINGS", self.tr("Road strings")))
 
-    def _raster(self, parameters, name, context):
-        layer = self.parameterAsRasterLayer(parameters, name, context)
-        return None if layer is None else read_raster(layer.source())
-
     def _context(self, parameters, context, crs):
         """Keyword arguments of link_road_parts for the optional rasters."""
-        image = self._raster(parameters, "IMAGE", context)
-        dsm = self._raster(parameters, "DSM", context)
+        image = read_raster_input(self, parameters, "IMAGE", context)
+        dsm = read_raster_input(self, parameters, "DSM", context)
         for raster, name in ((image, "image"), (dsm, "DSM")):
             if raster is not None and None not in (raster.crs, crs) and raster.crs != crs:
                 raise QgsProcessingException(
@@ -116,8 +108,7 @@ class SubgraphLinking(GisroadsAlgorithm):
             return {}
         if image is None:
             return {"transform": dsm.transform, "ndsm": normalised_dsm(dsm, dsm)}
-        nir = self.parameterAsInt(parameters, "NIR_BAND", context) or None
-        cues = image_cues(image, nir_band=nir, dsm=dsm)
+        cues = image_cues(image, **band_options(self, parameters, context), dsm=dsm)
         return {"transform": image.transform, **context_rasters(cues)}
 
     def _link(self, parts, parameters, context, feedback):
