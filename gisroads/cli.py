@@ -40,7 +40,10 @@ class _ProgressBar:
         sys.stderr.flush()
 
 
-def _print(result, as_json: bool, text: str) -> None:
+def _print(result: dict, as_json: bool, text: str | None = None) -> None:
+    """``result`` as JSON, else ``text`` (by default a ``key: value`` line per item)."""
+    if text is None:
+        text = "\n".join(f"{k}: {v}" for k, v in result.items())
     print(to_json(result) if as_json else text)
 
 
@@ -86,7 +89,7 @@ def cmd_synth(args) -> int:
                       density_per_m2=args.density, pixel_m=args.pixel,
                       cloud=not args.no_cloud, image=not args.no_image,
                       progress=_ProgressBar(not args.json))
-    _print(paths, args.json, "\n".join(f"{k}: {v}" for k, v in paths.items()))
+    _print(paths, args.json)
     return 0
 
 
@@ -122,7 +125,7 @@ def cmd_lidar(args) -> int:
     result = lidar_job(args.input, args.out, tagged_las=args.tagged_las,
                        rasters_dir=args.rasters, quicklook=args.quicklook,
                        progress=_ProgressBar(not args.json), **options)
-    _print(result, args.json, "\n".join(f"{k}: {v}" for k, v in result.items()))
+    _print(result, args.json)
     return 0
 
 
@@ -132,7 +135,7 @@ def cmd_blocks(args) -> int:
                         quicklook=args.quicklook, n_blocks=args.blocks,
                         sample_spacing_m=args.spacing, max_edge_m=args.max_edge,
                         progress=_ProgressBar(not args.json))
-    _print(result, args.json, "\n".join(f"{k}: {v}" for k, v in result.items()))
+    _print(result, args.json)
     return 0
 
 
@@ -142,7 +145,7 @@ def cmd_image(args) -> int:
                        dsm_path=args.dsm, pixel_m=args.pixel, crs=args.crs,
                        quicklook=args.quicklook, progress=_ProgressBar(not args.json),
                        **({"n_segments": args.segments} if args.segments else {}))
-    _print(result, args.json, "\n".join(f"{k}: {v}" for k, v in result.items()))
+    _print(result, args.json)
     return 0
 
 
@@ -151,7 +154,7 @@ def cmd_snakes(args) -> int:
     result = snakes_job(args.input, args.map, args.out, curb_detector=args.curb_detector,
                         tagged_las=args.tagged_las, attractor_tif=args.attractor,
                         progress=_ProgressBar(not args.json))
-    _print(result, args.json, "\n".join(f"{k}: {v}" for k, v in result.items()))
+    _print(result, args.json)
     return 0
 
 
@@ -182,6 +185,11 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--json", action="store_true", help="print the result as JSON")
         p.set_defaults(func=func)
         return p
+
+    def add_source_and_out(p, source, source_help):
+        """The positional ``source`` a job reads and the GeoPackage ``-o/--out`` it writes."""
+        p.add_argument(source, type=Path, help=source_help)
+        p.add_argument("-o", "--out", type=Path, required=True, help="output GeoPackage (.gpkg)")
 
     p = add("info", cmd_info, "describe a point cloud, raster or vector file",
             "Print what a file holds: for LAS/LAZ its version, point format, point count, "
@@ -235,8 +243,7 @@ def build_parser() -> argparse.ArgumentParser:
             "filters, per-width likelihood maps and a minimum cover of the hypotheses. "
             "Writes road centre lines with widths, road polygons, junctions and the QA "
             "layers rectangles and hypotheses to a GeoPackage in the cloud's CRS.")
-    p.add_argument("input", type=Path, help="LAS/LAZ point cloud with intensity")
-    p.add_argument("-o", "--out", type=Path, required=True, help="output GeoPackage (.gpkg)")
+    add_source_and_out(p, "input", "LAS/LAZ point cloud with intensity")
     p.add_argument("--cell", type=_positive,
                    help="intensity image cell in metres (default: 0.5, or the mean point "
                         "spacing of a sparser cloud)")
@@ -263,8 +270,7 @@ def build_parser() -> argparse.ArgumentParser:
             "missed. Input: a likelihood GeoTIFF of 'gisroads lidar --rasters' (the "
             "maximum over its width bands) or any road-probability raster in [0, 1]. "
             "Writes the city_blocks layer (block_id, area_m2, perimeter_m).")
-    p.add_argument("likelihood", type=Path, help="road-likelihood or probability GeoTIFF")
-    p.add_argument("-o", "--out", type=Path, required=True, help="output GeoPackage (.gpkg)")
+    add_source_and_out(p, "likelihood", "road-likelihood or probability GeoTIFF")
     p.add_argument("--points", type=Path,
                    help="LAS/LAZ whose ground points (class 2) are the graph's nodes "
                         "(default: a regular sample of the raster)")
@@ -284,8 +290,7 @@ def build_parser() -> argparse.ArgumentParser:
             "checks. Writes road centre lines with widths (and the cues used), road "
             "polygons, junctions and the QA layers segments, road_parts, gap_edges and "
             "junction_connections to a GeoPackage in the image's CRS.")
-    p.add_argument("input", type=Path, help="GeoTIFF (or PNG/JPEG with --pixel and --crs)")
-    p.add_argument("-o", "--out", type=Path, required=True, help="output GeoPackage (.gpkg)")
+    add_source_and_out(p, "input", "GeoTIFF (or PNG/JPEG with --pixel and --crs)")
     p.add_argument("--nir-band", type=int, help="1-based band number of the near infrared")
     p.add_argument("--red-band", type=int,
                    help="1-based band number of the red (default: band 1, or 2 in CIR)")
@@ -305,10 +310,9 @@ def build_parser() -> argparse.ArgumentParser:
             "centre lines with widths, road polygons (with their level), junctions from the "
             "map's topology and the QA layers ribbon_patches and registered_map to a "
             "GeoPackage in the cloud's CRS.")
-    p.add_argument("input", type=Path, help="LAS/LAZ point cloud")
+    add_source_and_out(p, "input", "LAS/LAZ point cloud")
     p.add_argument("map", type=Path, help="road map lines (GeoPackage, GeoJSON, any OGR "
                                           "line layer, any CRS)")
-    p.add_argument("-o", "--out", type=Path, required=True, help="output GeoPackage (.gpkg)")
     p.add_argument("--curb-detector", choices=("exp", "step", "none"), default="exp",
                    help="height weighting of the curb detector: exp (Gaussian, 15 cm mean, "
                         "5 cm deviation; default), step (10-20 cm) or none")
