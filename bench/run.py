@@ -55,6 +55,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -375,6 +376,28 @@ def case_imagery_tile(out: Path, size_px: int, pixel_m: float) -> dict:
     return result
 
 
+def _map_scene(size_m: float, jitter_m: float) -> tuple:
+    """A synthetic scene with every feature, its truth edges shifted 3 m and jittered
+    ``jitter_m`` as the road map, and the map's length in km."""
+    from gisroads.synthetic import make_scene
+    from gisroads.synthetic.perturb import perturb_lines
+
+    scene = make_scene(seed=0, size_m=(size_m, size_m))
+    shifted = perturb_lines(scene.truth_edges, shift_m=3.0, jitter_m=jitter_m, seed=0)
+    return scene, shifted, float(shifted.length.sum()) / 1000
+
+
+@contextmanager
+def _scene_laz(out: Path, scene, density: float):
+    """``(path, points)``: the scene's cloud streamed to a LAZ file in a scratch folder of
+    ``out``, removed on leaving the block."""
+    from gisroads.synthetic import write_cloud
+
+    with tempfile.TemporaryDirectory(dir=out) as tmp:
+        path = Path(tmp) / "cloud.laz"
+        yield path, write_cloud(scene, path, density_per_m2=density, seed=0)
+
+
 def case_snakes_registration(out: Path, size_m: float, density: float) -> dict:
     """Map registration and subclouds per km of road, streamed from a LAZ file."""
     import shapely
@@ -383,15 +406,9 @@ def case_snakes_registration(out: Path, size_m: float, density: float) -> dict:
     from gisroads.io.quicklook import write_quicklook
     from gisroads.snakes.registration import register_map
     from gisroads.snakes.subclouds import read_corridor, road_patches
-    from gisroads.synthetic import make_scene, write_cloud
-    from gisroads.synthetic.perturb import perturb_lines
 
-    scene = make_scene(seed=0, size_m=(size_m, size_m))
-    shifted = perturb_lines(scene.truth_edges, shift_m=3.0, jitter_m=0.3, seed=0)
-    road_km = float(shifted.length.sum()) / 1000
-    with tempfile.TemporaryDirectory(dir=out) as tmp:
-        path = Path(tmp) / "cloud.laz"
-        points = write_cloud(scene, path, density_per_m2=density, seed=0)
+    scene, shifted, road_km = _map_scene(size_m, jitter_m=0.3)
+    with _scene_laz(out, scene, density) as (path, points):
         along = shapely.get_coordinates(shapely.segmentize(shifted.geometry.values, 0.5))
         (cloud, _), read_s = _timed(read_corridor, path, along, 8.0 + 0.65)
         registered, register_s = _timed(register_map, shifted, cloud, snap_m=8.0)
@@ -430,15 +447,9 @@ def case_snakes(out: Path, size_m: float, density: float) -> dict:
     from gisroads.evaluate import area_metrics
     from gisroads.io.quicklook import write_quicklook
     from gisroads.snakes.pipeline import extract_map_guided
-    from gisroads.synthetic import make_scene, write_cloud
-    from gisroads.synthetic.perturb import perturb_lines
 
-    scene = make_scene(seed=0, size_m=(size_m, size_m))
-    shifted = perturb_lines(scene.truth_edges, shift_m=3.0, jitter_m=0.5, seed=0)
-    road_km = float(shifted.length.sum()) / 1000
-    with tempfile.TemporaryDirectory(dir=out) as tmp:
-        path = Path(tmp) / "cloud.laz"
-        points = write_cloud(scene, path, density_per_m2=density, seed=0)
+    scene, shifted, road_km = _map_scene(size_m, jitter_m=0.5)
+    with _scene_laz(out, scene, density) as (path, points):
         roads, snakes_s = _timed(extract_map_guided, path, shifted, snap_m=8.0)
     xmin, ymin, xmax, ymax = scene.extent
     valid = shapely.box(xmin + 5, ymin + 5, xmax - 5, ymax - 5)
