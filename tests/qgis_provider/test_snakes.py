@@ -6,28 +6,23 @@ import shapely
 from gisroads.evaluate import area_metrics
 from gisroads.io.las import read_las
 from gisroads.io.raster import read_raster
-from gisroads.io.vector import list_layers, read_layer, write_geopackage
+from gisroads.io.vector import list_layers, read_layer
 from gisroads.snakes.ribbon import sample_bilinear
-from gisroads.synthetic import make_scene, road_surface_mask, write_cloud
-from gisroads.synthetic.perturb import perturb_lines
+from gisroads.synthetic import road_surface_mask
+from tests.qgis_provider.map_scenes import cloud_and_map, map_inputs
 
 
 @pytest.fixture(scope="module")
 def streets(tmp_path_factory):
     """A 300 m grid of kerbed streets at 8 points/m2, and a map of its edges shifted 2.5 m
     and jittered, in geographic coordinates (the algorithms reproject it)."""
-    out = tmp_path_factory.mktemp("snakes")
-    scene = make_scene(seed=4, size_m=(300.0, 300.0), features=())
-    write_cloud(scene, out / "cloud.laz", density_per_m2=8.0, seed=0)
-    shifted = perturb_lines(scene.truth_edges, shift_m=2.5, jitter_m=0.3, seed=3)
-    write_geopackage(out / "map.gpkg", {"osm_lines": shifted.to_crs("EPSG:4326")})
-    return scene, out
+    return cloud_and_map(tmp_path_factory.mktemp("snakes"), seed=4, features=(),
+                         density_per_m2=8.0)
 
 
 def test_ribbon_snakes_find_the_road_area(qgis_process, streets, tmp_path):
     scene, folder = streets
-    result = qgis_process.run("ribbonsnakeroads", INPUT=folder / "cloud.laz",
-                              MAP=f"{folder / 'map.gpkg'}|layername=osm_lines", SNAP=6.0,
+    result = qgis_process.run("ribbonsnakeroads", **map_inputs(folder), SNAP=6.0,
                               OUTPUT=tmp_path / "roads.gpkg", TAGGED_LAS=tmp_path / "t.laz",
                               ATTRACTOR=tmp_path / "a.tif")
     layers = set(list_layers(tmp_path / "roads.gpkg"))
@@ -56,8 +51,7 @@ def test_ribbon_snakes_find_the_road_area(qgis_process, streets, tmp_path):
 def test_the_curb_attractor_is_bright_on_the_kerbs_and_dark_mid_road(qgis_process, streets,
                                                                      tmp_path):
     scene, folder = streets
-    qgis_process.run("curbattractormap", INPUT=folder / "cloud.laz",
-                     MAP=f"{folder / 'map.gpkg'}|layername=osm_lines", SNAP=6.0,
+    qgis_process.run("curbattractormap", **map_inputs(folder), SNAP=6.0,
                      OUTPUT=tmp_path / "attractor.tif")
     raster = read_raster(tmp_path / "attractor.tif")
     a = raster.data[0] if raster.data.ndim == 3 else raster.data
@@ -77,8 +71,7 @@ def test_the_curb_attractor_is_bright_on_the_kerbs_and_dark_mid_road(qgis_proces
 def test_tag_road_points_takes_the_ribbons_without_a_height_raster(qgis_process, streets,
                                                                    tmp_path):
     scene, folder = streets
-    qgis_process.run("ribbonsnakeroads", INPUT=folder / "cloud.laz",
-                     MAP=f"{folder / 'map.gpkg'}|layername=osm_lines", SNAP=6.0,
+    qgis_process.run("ribbonsnakeroads", **map_inputs(folder), SNAP=6.0,
                      OUTPUT=tmp_path / "roads.gpkg")
     result = qgis_process.run("tagroadpoints", INPUT=folder / "cloud.laz",
                               POLYGONS=tmp_path / "roads.gpkg", OUTPUT=tmp_path / "t.laz")

@@ -5,25 +5,19 @@ import shapely
 
 from gisroads.io.las import read_las
 from gisroads.io.vector import list_layers, read_layer, write_geopackage
-from gisroads.synthetic import make_scene, write_cloud
-from gisroads.synthetic.perturb import perturb_lines
+from tests.qgis_provider.map_scenes import cloud_and_map, map_inputs
 
 
 @pytest.fixture(scope="module")
 def overpass(tmp_path_factory):
-    out = tmp_path_factory.mktemp("register")
-    scene = make_scene(seed=2, size_m=(300.0, 300.0), features=("bridge", "cliff"))
-    write_cloud(scene, out / "cloud.laz", density_per_m2=5.0, seed=0)
-    shifted = perturb_lines(scene.truth_edges, shift_m=2.5, jitter_m=0.3, seed=3)
-    # The map comes in geographic coordinates: the algorithm reprojects it.
-    write_geopackage(out / "map.gpkg", {"osm_lines": shifted.to_crs("EPSG:4326")})
-    return scene, out
+    """A bridge and a cliff road at 5 points/m2, and a map of its edges shifted 2.5 m."""
+    return cloud_and_map(tmp_path_factory.mktemp("register"), seed=2,
+                         features=("bridge", "cliff"), density_per_m2=5.0)
 
 
 def test_registered_vertices_lie_on_the_surface(qgis_process, overpass, tmp_path):
     scene, folder = overpass
-    result = qgis_process.run("registerroadmap", INPUT=folder / "cloud.laz",
-                              MAP=f"{folder / 'map.gpkg'}|layername=osm_lines", SNAP=7.0,
+    result = qgis_process.run("registerroadmap", **map_inputs(folder), SNAP=7.0,
                               OUTPUT=tmp_path / "registered.gpkg")
     assert list_layers(tmp_path / "registered.gpkg") == ["registered_map"]
     lines = read_layer(tmp_path / "registered.gpkg", "registered_map")
