@@ -1,8 +1,9 @@
 """What every gisroads algorithm shares: group, translation hook, instance creation, help."""
 import re
 
-from qgis.core import (QgsProcessingAlgorithm, QgsProcessingOutputNumber,
-                       QgsProcessingParameterFile, QgsProcessingParameterFileDestination)
+from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutputNumber,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
+                       QgsProcessingParameterFileDestination)
 from qgis.PyQt.QtCore import QCoreApplication
 
 
@@ -67,6 +68,14 @@ def cloud_input(tr, text: str) -> QgsProcessingParameterFile:
     param = QgsProcessingParameterFile("INPUT", tr("Point cloud (LAS/LAZ)"),
                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)")
     param.setHelp(tr(text))
+    return param
+
+
+def road_map_input(tr) -> QgsProcessingParameterFeatureSource:
+    """The approximate road map parameter ``MAP`` of the map-guided algorithms."""
+    param = QgsProcessingParameterFeatureSource("MAP", tr("Road map lines"),
+                                                [QgsProcessing.TypeVectorLine])
+    param.setHelp(tr("approximate road centre lines in any CRS (reprojected to the cloud's)"))
     return param
 
 

@@ -1,12 +1,11 @@
 """Curb attractor map: where a road boundary is likely along a road map (Boyko & Funkhouser)."""
-from qgis.core import (QgsProcessing, QgsProcessingParameterEnum,
-                       QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber,
+from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination)
 
 from gisroads.jobs import attractor_job
 
 from ..convert import gisroads_errors, progress_callback, source_to_frame
-from .base import GisroadsAlgorithm, cloud_input
+from .base import GisroadsAlgorithm, cloud_input, road_map_input
 
 DETECTORS = ("exp", "step", "none")
 
@@ -16,9 +15,7 @@ def map_guided_parameters(tr, cell_help: str) -> list:
     intersection snapping, as ``(parameter, help)`` pairs."""
     return [
         (cloud_input(tr, "the cloud; read chunk by chunk, only along the map"), None),
-        (QgsProcessingParameterFeatureSource("MAP", tr("Road map lines"),
-                                             [QgsProcessing.TypeVectorLine]),
-         "approximate road centre lines in any CRS (reprojected to the cloud's)"),
+        (road_map_input(tr), None),
         (QgsProcessingParameterEnum("DETECTOR", tr("Curb detector"),
                                     options=["exp: Gaussian, 15 cm mean (paper's best)",
                                              "step: 10-20 cm", "none: normals only"],
@@ -32,6 +29,17 @@ def map_guided_parameters(tr, cell_help: str) -> list:
                                       minValue=0.01, maxValue=50.0),
          "map line ends closer than this are one intersection"),
     ]
+
+
+def map_guided_arguments(algorithm, parameters, context, feedback) -> tuple:
+    """``(cloud path, map lines, options)`` from the ``map_guided_parameters``; options are
+    the jobs' ``curb_detector``, ``cell_m`` and ``snap_m``."""
+    lines = source_to_frame(algorithm.parameterAsSource(parameters, "MAP", context), feedback)
+    options = {
+        "curb_detector": DETECTORS[algorithm.parameterAsEnum(parameters, "DETECTOR", context)],
+        "cell_m": algorithm.parameterAsDouble(parameters, "CELL", context),
+        "snap_m": algorithm.parameterAsDouble(parameters, "SNAP", context)}
+    return algorithm.parameterAsFile(parameters, "INPUT", context), lines, options
 
 
 class CurbAttractorMap(GisroadsAlgorithm):
@@ -63,12 +71,7 @@ class CurbAttractorMap(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
-        lines = source_to_frame(self.parameterAsSource(parameters, "MAP", context), feedback)
+        cloud, lines, options = map_guided_arguments(self, parameters, context, feedback)
         with gisroads_errors():
-            attractor_job(self.parameterAsFile(parameters, "INPUT", context), lines, out,
-                          curb_detector=DETECTORS[self.parameterAsEnum(parameters, "DETECTOR",
-                                                                       context)],
-                          cell_m=self.parameterAsDouble(parameters, "CELL", context),
-                          snap_m=self.parameterAsDouble(parameters, "SNAP", context),
-                          progress=progress_callback(feedback))
+            attractor_job(cloud, lines, out, progress=progress_callback(feedback), **options)
         return {"OUTPUT": out}

@@ -1,13 +1,12 @@
 """Register road map to point cloud: a 2D road map lifted onto a LAS/LAZ cloud in 3D."""
-from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
-                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
+from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber)
 
 from gisroads.jobs import register_job
 
 from ..convert import (gisroads_errors, load_geopackage_on_completion, progress_callback,
                        source_to_frame)
-from .base import GisroadsAlgorithm, cloud_input
+from .base import GisroadsAlgorithm, cloud_input, road_map_input
 
 
 class RegisterRoadMap(GisroadsAlgorithm):
@@ -37,9 +36,7 @@ class RegisterRoadMap(GisroadsAlgorithm):
         params = [
             (cloud_input(self.tr, "the cloud to register the map on; read chunk by chunk, "
                                   "only along the map"), None),
-            (QgsProcessingParameterFeatureSource("MAP", self.tr("Road map lines"),
-                                                 [QgsProcessing.TypeVectorLine]),
-             "approximate road centre lines in any CRS (reprojected to the cloud's)"),
+            (road_map_input(self.tr), None),
             (QgsProcessingParameterNumber("SNAP", self.tr("Intersection snapping (metres)"),
                                           double, 2.0, minValue=0.01, maxValue=50.0),
              "line ends closer than this are one intersection; an end this close to "

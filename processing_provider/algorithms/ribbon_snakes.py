@@ -5,10 +5,9 @@ from qgis.core import (QgsProcessingParameterFileDestination,
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import snakes_job
 
-from ..convert import (gisroads_errors, load_geopackage_on_completion, progress_callback,
-                       source_to_frame)
+from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
 from .base import GisroadsAlgorithm, network_output
-from .curb_attractor import DETECTORS, map_guided_parameters
+from .curb_attractor import map_guided_arguments, map_guided_parameters
 
 
 class RibbonSnakeRoads(GisroadsAlgorithm):
@@ -51,15 +50,10 @@ class RibbonSnakeRoads(GisroadsAlgorithm):
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
         tagged = self.parameterAsFileOutput(parameters, "TAGGED_LAS", context) or None
         attractor = self.parameterAsOutputLayer(parameters, "ATTRACTOR", context) or None
-        lines = source_to_frame(self.parameterAsSource(parameters, "MAP", context), feedback)
+        cloud, lines, options = map_guided_arguments(self, parameters, context, feedback)
         with gisroads_errors():
-            result = snakes_job(
-                self.parameterAsFile(parameters, "INPUT", context), lines, out,
-                curb_detector=DETECTORS[self.parameterAsEnum(parameters, "DETECTOR", context)],
-                tagged_las=tagged, attractor_tif=attractor,
-                cell_m=self.parameterAsDouble(parameters, "CELL", context),
-                snap_m=self.parameterAsDouble(parameters, "SNAP", context),
-                progress=progress_callback(feedback))
+            result = snakes_job(cloud, lines, out, tagged_las=tagged, attractor_tif=attractor,
+                                progress=progress_callback(feedback), **options)
         load_geopackage_on_completion(context, out, ("ribbon_patches", POLYGONS, CENTRELINES,
                                                      JUNCTIONS), group="roads")
         return {"OUTPUT": out, "TAGGED_LAS": tagged, "ATTRACTOR": attractor,
