@@ -37,14 +37,14 @@ snakes
     map alone gives, with the width known).
 imagery_real
     Every image of ../shared/data/imagery (gisroads.imagery.datasets) through the naive
-    threshold-morphology-skeleton baseline and, once it exists, the imagery pipeline:
-    completeness, correctness and quality per image and on average (buffer 3 m,
-    Massachusetts 4 m, no-data excluded), seconds, per-stage seconds, a quick-look per image
-    and method in OUT/imagery/, the table in OUT/imagery_real.md.
+    threshold-morphology-skeleton baseline and the imagery pipeline: completeness,
+    correctness and quality per image and on average (buffer 3 m, Massachusetts 4 m, no-data
+    excluded), seconds, per-stage seconds, a quick-look per image and method in
+    OUT/imagery/, the table in OUT/imagery_real.md; also the mean scores of the pipeline's
+    road-part centre lines alone, before linking and network generation.
 imagery_tile
     The imagery pipeline on a 1000 x 1000 synthetic RGB tile (0.3 m) on one core, per-stage
-    seconds and scores against the scene's truth, beside the baseline; skipped while
-    gisroads.imagery.pipeline does not exist.
+    seconds and scores against the scene's truth, beside the baseline.
 """
 from __future__ import annotations
 
@@ -235,17 +235,6 @@ def case_lidar_real(out: Path, data_dir: str) -> dict:
     return results
 
 
-def _image_pipeline():
-    """``extract_image_roads`` of the imagery pipeline, or None while its module is missing."""
-    try:
-        from gisroads.imagery.pipeline import extract_image_roads
-    except ModuleNotFoundError as err:
-        if err.name != "gisroads.imagery.pipeline":
-            raise
-        return None
-    return extract_image_roads
-
-
 def _image_baseline(image):
     from gisroads.imagery.baseline import baseline_roads
     return baseline_roads(image), {}
@@ -269,10 +258,13 @@ def _imagery_table(per_image: dict, methods) -> str:
     means = [f"{np.nanmean([e[f'{m}_{k}'] for e in scored]):.3f}" for m in methods
              for k in (*_SCORES, "s")]
     lines.append(f"| **mean of {len(scored)}** | | | " + " | ".join(means) + " |")
-    if "pipeline" in methods:
-        quality = [np.nanmean([e[f"{m}_quality"] for e in scored]) for m in methods]
-        lines += ["", f"Mean quality: pipeline {quality[1]:.3f}, baseline {quality[0]:.3f}, "
-                      f"ratio {quality[1] / quality[0]:.2f} (target >= 1.5)."]
+    quality = {m: np.nanmean([e[f"{m}_quality"] for e in scored]) for m in methods}
+    parts = [np.nanmean([e[f"road_parts_{k}"] for e in scored]) for k in _SCORES]
+    lines += ["", f"Mean quality: pipeline {quality['pipeline']:.3f}, baseline "
+                  f"{quality['baseline']:.3f}, ratio "
+                  f"{quality['pipeline'] / quality['baseline']:.2f} (target >= 1.5).",
+              "", "The pipeline's road-part centre lines alone (before linking and network "
+                  "generation), mean C/K/Q: " + " / ".join(f"{v:.3f}" for v in parts) + "."]
     stages = list(dict.fromkeys(k for e in per_image.values() for k in e
                                 if k.startswith("stage_")))
     if stages:
@@ -284,17 +276,19 @@ def _imagery_table(per_image: dict, methods) -> str:
 
 
 def case_imagery_real(out: Path, data_dir: str, datasets=None) -> dict:
-    """Every real benchmark image through the naive baseline and, once it exists, the
-    imagery pipeline: buffer scores against the truth, times, quick-looks."""
+    """Every real benchmark image through the naive baseline and the imagery pipeline:
+    buffer scores against the truth, times, quick-looks; for the pipeline also the scores of
+    its road-part centre lines alone (before linking and network generation), which say
+    how much of the loss is in the choice of road parts."""
     import geopandas as gpd
 
     from gisroads.evaluate import buffer_metrics, match_layers
     from gisroads.imagery.datasets import DATASETS, benchmark_images
+    from gisroads.imagery.pipeline import extract_image_roads
     from gisroads.io.quicklook import evaluation_layers, write_quicklook
 
-    methods = {"baseline": _image_baseline, "pipeline": _image_pipeline()}
-    if methods["pipeline"] is None:
-        del methods["pipeline"]
+    # extract_image_roads returns (network, report), as the baseline does
+    methods = {"baseline": _image_baseline, "pipeline": extract_image_roads}
     looks = out / "imagery"
     looks.mkdir(exist_ok=True)
     per_image = {}
@@ -314,6 +308,9 @@ def case_imagery_real(out: Path, data_dir: str, datasets=None) -> dict:
                 match = dict(buffer_m=record.buffer_m, valid_area=record.valid_area)
                 scores = buffer_metrics(lines, record.truth, **match)
                 entry.update({f"{method}_{k}": getattr(scores, k) for k in _SCORES})
+                if method == "pipeline":
+                    parts = buffer_metrics(network.qa["road_parts"], record.truth, **match)
+                    entry.update({f"road_parts_{k}": getattr(parts, k) for k in _SCORES})
                 layers += evaluation_layers(match_layers(lines, record.truth, **match))
                 title = (f"{record.name} {method}: completeness {scores.completeness:.2f}, "
                          f"correctness {scores.correctness:.2f}, quality {scores.quality:.2f}")
@@ -325,15 +322,13 @@ def case_imagery_real(out: Path, data_dir: str, datasets=None) -> dict:
         per_image[record.name] = entry
     scored = [e for e in per_image.values() if e["scored"]]
     result = {"images_scored": len(scored)}
-    for method in methods:
-        for key in (*_SCORES, "s"):
+    for method, keys in (("baseline", (*_SCORES, "s")), ("pipeline", (*_SCORES, "s")),
+                         ("road_parts", _SCORES)):
+        for key in keys:
             result[f"{method}_mean_{key}"] = float(np.nanmean([e[f"{method}_{key}"]
                                                               for e in scored]))
-    if "pipeline" in methods:
-        result["quality_ratio_to_baseline"] = (result["pipeline_mean_quality"]
-                                               / result["baseline_mean_quality"])
-    else:
-        result["pipeline"] = "skipped: gisroads.imagery.pipeline does not exist yet"
+    result["quality_ratio_to_baseline"] = (result["pipeline_mean_quality"]
+                                           / result["baseline_mean_quality"])
     table = _imagery_table(per_image, list(methods))
     (out / "imagery_real.md").write_text(table)
     return {**result, "per_image": per_image, "table": table}
@@ -348,18 +343,16 @@ def case_imagery_tile(out: Path, size_px: int, pixel_m: float) -> dict:
 
     from gisroads.evaluate import buffer_metrics, match_layers
     from gisroads.geo import GeoRaster
+    from gisroads.imagery.pipeline import extract_image_roads
     from gisroads.io.quicklook import evaluation_layers, write_quicklook
     from gisroads.synthetic import make_scene, render_image
 
-    pipeline = _image_pipeline()
-    if pipeline is None:
-        return {"skipped": "gisroads.imagery.pipeline does not exist yet"}
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     scene = make_scene(seed=0, size_m=(size_px * pixel_m, size_px * pixel_m))
     rendered, _ = render_image(scene, pixel_m=pixel_m)
     image = GeoRaster(rendered.data[:3, :size_px, :size_px], rendered.transform, rendered.crs)
-    (network, qa), seconds = _timed(pipeline, image)
+    (network, qa), seconds = _timed(extract_image_roads, image)
     (baseline, _), baseline_s = _timed(_image_baseline, image)
     frame = shapely.box(*image.bounds)
     result = {"tile_px": size_px, "pixel_m": pixel_m, "cores": 1, "pipeline_s": seconds,
