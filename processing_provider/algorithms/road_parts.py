@@ -57,6 +57,11 @@ THRESHOLDS = {
     "MAX_INTENSITY_STD": ("Largest intensity standard deviation (0-1)",
                           ("intensity_std_max", None),
                           "roads are homogeneous; gardens, roofs with structure are not"),
+    "MIN_EDGE_CONTRAST": ("Smallest border edge contrast", ("edge_contrast_min", None),
+                          "mean edge strength on the segment's border over that inside it: "
+                          "a road part is a homogeneous region bounded by edges, while "
+                          "regions cut out of texture (forest, fields) are not; 0 (the "
+                          "default) turns the test off, about 1.1-1.2 on textured scenes"),
     "ROAD_WIDTH": ("Typical road width (metres)", ("road_width_m", None),
                    "the width the quality measure rewards most"),
 }

@@ -75,6 +75,18 @@ def test_dsm_and_thresholds_are_used(qgis_process, inputs, tmp_path):
     assert tested.height_m[1] == pytest.approx(6.0, abs=0.1)
 
 
+def test_edge_contrast_threshold_is_used(qgis_process, inputs, tmp_path):
+    tested_path = tmp_path / "tested.gpkg"
+    result = qgis_process.run("roadparts", IMAGE=inputs / "image.tif",
+                              SEGMENTS=f"{inputs / 'segments.gpkg'}|layername=segments",
+                              MIN_EDGE_CONTRAST=1000, OUTPUT_SEGMENTS=tested_path,
+                              ROAD_PARTS=tmp_path / "parts.gpkg")
+    tested = gpd.read_file(tested_path).set_index("segment_id")
+    assert result["PARTS"] == 0
+    assert tested.reason[1] == "no border edges"
+    assert 1 < tested.edge_contrast[1] < 1000   # the road's border is the grass edge
+
+
 def test_road_parts_style_colours_by_quality(qgis_app, tmp_path):
     from qgis.core import QgsRenderContext, QgsVectorLayer
     lines = gpd.GeoDataFrame({"part_id": [0, 1], "quality": [0.1, 0.9]},
