@@ -3,10 +3,16 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
+from affine import Affine
+from pyproj import CRS
 
+from gisroads.geo import GeoRaster
+from gisroads.io.raster import RasterError, write_geotiff
 from gisroads.io.vector import list_layers, read_layer
-from gisroads.jobs import read_image
+from gisroads.jobs import image_job, read_image
+from gisroads.progress import Cancelled
 from gisroads.synthetic import make_scene
 from gisroads.synthetic.image import write_image
 
@@ -51,3 +57,50 @@ def test_a_geographic_image_is_read_in_its_utm_zone(shared_data):
     assert source_crs.to_epsg() == 4326
     assert image.crs.to_epsg() == 32631  # Paris: UTM 31N
     assert 0.2 <= image.pixel_size <= 0.3  # 0.2 m east-west, 0.3 m north-south pixels
+
+
+GRID = Affine(0.5, 0, 500000.0, 0, -0.5, 4500000.0)
+
+
+def test_an_image_without_roads_is_an_error_and_writes_nothing(tmp_path):
+    rng = np.random.default_rng(0)
+    lawn = np.array([80.0, 112.0, 52.0])[:, None, None] + rng.normal(0, 4, (3, 400, 400))
+    write_geotiff(tmp_path / "lawn.tif", GeoRaster(lawn.clip(0, 255).astype(np.uint8), GRID,
+                                                   CRS("EPSG:32633")))
+    with pytest.raises(ValueError, match="no road found"):
+        image_job(tmp_path / "lawn.tif", tmp_path / "roads.gpkg")
+    assert list(tmp_path.iterdir()) == [tmp_path / "lawn.tif"]
+
+
+@pytest.mark.parametrize("content, message", [
+    ("nan", "every cell is NaN or nodata"),
+    ("junk", "not a readable raster"),
+])
+def test_unreadable_or_empty_images_are_one_line_errors(tmp_path, content, message):
+    path = tmp_path / "image.tif"
+    if content == "nan":
+        write_geotiff(path, GeoRaster(np.full((3, 50, 50), np.nan, np.float32), GRID,
+                                      CRS("EPSG:32633")))
+    else:
+        path.write_bytes(b"II*\x00" + bytes(range(256)) * 2)
+    with pytest.raises(RasterError, match=message):
+        image_job(path, tmp_path / "roads.gpkg")
+    result = gisroads("image", path, "-o", tmp_path / "roads.gpkg")
+    assert result.returncode == 2 and message in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "roads.gpkg").exists()
+
+
+def test_a_cancelled_job_leaves_no_output(image_files, tmp_path):
+    seen = []
+
+    def cancel_in_grouping(fraction, message):
+        seen.append(message)
+        if fraction >= 0.45:
+            raise Cancelled
+
+    with pytest.raises(Cancelled):
+        image_job(image_files / "image.tif", tmp_path / "roads.gpkg",
+                  progress=cancel_in_grouping)
+    assert any("grouping" in message for message in seen)
+    assert list(tmp_path.iterdir()) == []
