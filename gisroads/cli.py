@@ -296,7 +296,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="1-based band number of the red (default: band 1, or 2 in CIR)")
     p.add_argument("--dsm", type=Path, help="digital surface model GeoTIFF (metres)")
     p.add_argument("--segments", type=int,
-                   help="NCut segments (default: one per 300 m² of ground, 50-1500)")
+                   help="NCut segments (default: one per 36 m² of ground, at least 100 "
+                        "pixels each: gisroads.imagery.segments.default_counts)")
     p.add_argument("--pixel", type=_positive,
                    help="pixel size in metres, for an image without georeferencing")
     p.add_argument("--crs", help="projected CRS for an image without georeferencing, "

@@ -2,6 +2,7 @@
 from qgis.core import QgsProcessingOutputString, QgsProcessingParameterNumber
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
+from gisroads.imagery.segments import MIN_SEGMENT_PX, SEGMENT_AREA_M2
 from gisroads.jobs import image_job
 
 from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
@@ -43,8 +44,9 @@ class ImageryRoadNetwork(GisroadsAlgorithm):
                 "gap context") + [
             (QgsProcessingParameterNumber("SEGMENTS", self.tr("NCut segments"),
                                           QgsProcessingParameterNumber.Integer, None,
-                                          optional=True, minValue=10, maxValue=5000),
-             "empty: one segment per 300 m² of ground (50-1500)"),
+                                          optional=True, minValue=1),
+             f"target over-segmentation size; empty: one segment per {SEGMENT_AREA_M2:g} m2 "
+             f"of ground (at least {MIN_SEGMENT_PX} pixels each)"),
             (network_output(self.tr, "GeoPackage receiving every layer, in the image's CRS"), None),
         ]
         self.add_parameters(params)

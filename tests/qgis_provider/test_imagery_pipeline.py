@@ -1,5 +1,11 @@
 """The whole imagery pipeline through qgis_process: the plugin's algorithm, the image's cues."""
+import numpy as np
+from affine import Affine
+from pyproj import CRS
+
 from gisroads.evaluate import buffer_metrics
+from gisroads.geo import GeoRaster
+from gisroads.io.raster import write_geotiff
 from gisroads.io.vector import list_layers, read_layer
 
 
@@ -20,4 +26,17 @@ def test_imagery_band_the_image_lacks_fails_cleanly(qgis_process, scene_dir, tmp
                           f"INPUT={scene_dir / 'dsm.tif'}", "NIR_BAND=1", "RED_BAND=3",
                           f"OUTPUT={tmp_path / 'r.gpkg'}", check=False)
     assert result.returncode == 1 and "no red band 3" in result.stdout + result.stderr
+    assert not (tmp_path / "r.gpkg").exists()
+
+
+def test_an_image_without_roads_fails_cleanly(qgis_process, tmp_path):
+    rng = np.random.default_rng(0)
+    lawn = np.array([80.0, 112.0, 52.0])[:, None, None] + rng.normal(0, 4, (3, 300, 300))
+    write_geotiff(tmp_path / "lawn.tif",
+                  GeoRaster(lawn.clip(0, 255).astype(np.uint8),
+                            Affine(0.5, 0, 500000.0, 0, -0.5, 4500000.0), CRS("EPSG:32633")))
+    result = qgis_process("run", "gisroads:imageryroadnetwork", "--",
+                          f"INPUT={tmp_path / 'lawn.tif'}", f"OUTPUT={tmp_path / 'r.gpkg'}",
+                          check=False)
+    assert result.returncode == 1 and "no road found" in result.stdout + result.stderr
     assert not (tmp_path / "r.gpkg").exists()

@@ -2,12 +2,13 @@
 from pathlib import Path
 
 import geopandas as gpd
-import numpy as np
 import pytest
 import shapely
 from qgis.core import (QgsApplication, QgsProcessingContext, QgsProcessingException,
                        QgsProcessingFeedback, QgsVectorLayer)
 
+from gisroads.synthetic import make_scene
+from gisroads.synthetic.image import write_image
 from processing_provider.convert import source_to_frame, to_pyproj, to_qgis
 from processing_provider.provider import GisroadsProvider
 
@@ -50,6 +51,20 @@ def test_cancel_while_writing_the_cloud_leaves_no_partial_file(registry, tmp_pat
              "OUTPUT_FOLDER": str(tmp_path / "out")}, feedback)
     # truth.gpkg is complete before the cloud starts; the cloud is absent, not partial
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["truth.gpkg"]
+
+
+def test_cancel_during_the_imagery_pipeline_leaves_no_output(registry, tmp_path):
+    write_image(make_scene(seed=1, size_m=(300.0, 300.0)), tmp_path / "image.tif",
+                tmp_path / "dsm.tif", pixel_m=2.0)
+    feedback = QgsProcessingFeedback()
+    percents = []
+    feedback.progressChanged.connect(
+        lambda percent: (percents.append(percent), percent > 45 and feedback.cancel()))
+    with pytest.raises(QgsProcessingException, match="cancelled"):
+        run(registry, "imageryroadnetwork", {"INPUT": str(tmp_path / "image.tif"),
+                                             "OUTPUT": str(tmp_path / "roads.gpkg")}, feedback)
+    assert 45 < max(percents) < 100
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dsm.tif", "image.tif"]
 
 
 def test_layer_to_frame_keeps_geometry_attributes_nulls_and_crs(qgis_app, tmp_path):
