@@ -149,13 +149,11 @@ def ndvi(image: GeoRaster, nir_band: int, red_band: int | None = None) -> np.nda
     red_band = _check_band(red_band, len(bands), "red")
     if red_band == nir_band:
         raise ValueError(f"the NIR and red bands are the same band ({nir_band})")
-    nir = bands[nir_band - 1].astype(np.float32)
-    red = bands[red_band - 1].astype(np.float32)
+    nir, red = _float_bands(image, (nir_band, red_band), ("NIR", "red"))
     total = nir + red
     with np.errstate(invalid="ignore", divide="ignore"):
-        index = np.where(total != 0, (nir - red) / total, np.nan).astype(np.float32)
-    index[~valid_mask(image)] = np.nan
-    return index
+        index = np.where(total != 0, (nir - red) / total, np.nan)
+    return _without_nodata(image, index)
 
 
 def excess_green(image: GeoRaster, bands=(1, 2, 3)) -> np.ndarray:
@@ -175,15 +173,11 @@ def excess_green(image: GeoRaster, bands=(1, 2, 3)) -> np.ndarray:
     -------
     ndarray of float32, shape ``(rows, cols)``; NaN where the image has no data or is black.
     """
-    data = _bands(image)
-    red, green, blue = (data[_check_band(b, len(data), name) - 1].astype(np.float32)
-                        for b, name in zip(bands, ("red", "green", "blue")))
+    red, green, blue = _float_bands(image, bands, ("red", "green", "blue"))
     total = red + green + blue
     with np.errstate(invalid="ignore", divide="ignore"):
         index = np.where(total > 0, (2 * green - red - blue) / total, np.nan)
-    index = index.astype(np.float32)
-    index[~valid_mask(image)] = np.nan
-    return index
+    return _without_nodata(image, index)
 
 
 def saturation(image: GeoRaster, bands=(1, 2, 3)) -> np.ndarray:
@@ -205,14 +199,25 @@ def saturation(image: GeoRaster, bands=(1, 2, 3)) -> np.ndarray:
     ndarray of float32, shape ``(rows, cols)``; NaN where the image has no data, 0 where
     it is black.
     """
-    data = _bands(image)
-    rgb = np.stack([data[_check_band(b, len(data), "colour") - 1].astype(np.float32)
-                    for b in bands])
+    rgb = np.stack(_float_bands(image, bands, ("colour",) * 3))
     top = rgb.max(axis=0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        value = np.where(top > 0, (top - rgb.min(axis=0)) / top, 0.0).astype(np.float32)
-    value[~valid_mask(image)] = np.nan
-    return value
+        value = np.where(top > 0, (top - rgb.min(axis=0)) / top, 0.0)
+    return _without_nodata(image, value)
+
+
+def _float_bands(image: GeoRaster, bands, names) -> list[np.ndarray]:
+    """The 1-based ``bands`` of ``image`` as float32 arrays (``names`` for the errors)."""
+    data = _bands(image)
+    return [data[_check_band(b, len(data), name) - 1].astype(np.float32)
+            for b, name in zip(bands, names)]
+
+
+def _without_nodata(image: GeoRaster, values: np.ndarray) -> np.ndarray:
+    """``values`` as float32, NaN where ``image`` has no data."""
+    values = values.astype(np.float32)
+    values[~valid_mask(image)] = np.nan
+    return values
 
 
 def resample_to(raster: GeoRaster, like: GeoRaster, *, order: int = 1) -> np.ndarray:
