@@ -204,12 +204,14 @@ def ncut(affinity, n_segments: int, *, seed: int = 0) -> np.ndarray:
     return _canonical(labels)
 
 
-def _robust_std(values: np.ndarray) -> float:
-    """1.4826 x median absolute deviation; the plain std if that is 0; 1 if both are."""
+def _robust_std(values: np.ndarray, centre: float | None = None) -> float:
+    """1.4826 x median absolute deviation (from ``centre``, default the median); the plain
+    std if that is 0; 1 if both are."""
     values = values[np.isfinite(values)]
     if values.size == 0:
         return 1.0
-    mad = 1.4826 * float(np.median(np.abs(values - np.median(values))))
+    centre = np.median(values) if centre is None else centre
+    mad = 1.4826 * float(np.median(np.abs(values - centre), overwrite_input=True))
     return mad if mad > 0 else (float(values.std()) or 1.0)
 
 
@@ -330,20 +332,21 @@ def _features(bands: np.ndarray, superpixels: np.ndarray, n: int) -> dict:
             "centroid": centroid}
 
 
-def _noise_std(band: np.ndarray, valid: np.ndarray) -> float:
+def _noise_std(band: np.ndarray, valid: np.ndarray, spread: float) -> float:
     """Robust standard deviation of the pixel noise, from differences of 4-neighbours.
 
     Edges touch few neighbour pairs, so the MAD of the differences sees the noise only; a
     difference of two noisy cells has sqrt(2) times their noise. Falls back to 1% of the
-    band's robust standard deviation for noise-free (piecewise constant) images.
+    band's robust standard deviation ``spread`` for noise-free (piecewise constant) images.
     """
     differences = [(band[:, 1:] - band[:, :-1])[valid[:, 1:] & valid[:, :-1]],
                    (band[1:, :] - band[:-1, :])[valid[1:, :] & valid[:-1, :]]]
-    differences = np.concatenate(differences)
+    differences = np.abs(np.concatenate(differences))
     noise = 0.0
     if differences.size:
-        noise = 1.4826 * float(np.median(np.abs(differences))) / np.sqrt(2)
-    return max(noise, 0.01 * _robust_std(band[valid]))
+        # the differences are a scratch array: partitioned in place, not copied
+        noise = 1.4826 * float(np.median(differences, overwrite_input=True)) / np.sqrt(2)
+    return max(noise, 0.01 * spread)
 
 
 def _slic_superpixels(bands: np.ndarray, valid: np.ndarray, n_superpixels: int,
@@ -356,9 +359,11 @@ def _slic_superpixels(bands: np.ndarray, valid: np.ndarray, n_superpixels: int,
     """
     standardised = np.zeros(bands.shape)
     for out, band in zip(standardised, bands):
-        centre, spread = np.median(band[valid]), _robust_std(band[valid])
-        clipped = np.clip(band[valid], centre - SLIC_CLIP * spread, centre + SLIC_CLIP * spread)
-        out[valid] = (clipped - centre) / _noise_std(band, valid)
+        values = band[valid]
+        centre = np.median(values)
+        spread = _robust_std(values, centre)
+        clipped = np.clip(values, centre - SLIC_CLIP * spread, centre + SLIC_CLIP * spread)
+        out[valid] = (clipped - centre) / _noise_std(band, valid, spread)
     standardised = fill_nearest(standardised, valid)
     # slic rescales the image to [0, 1] by its range: scale the compactness alike so that it
     # stays in units of the noise
