@@ -6,7 +6,6 @@ then a missing QGIS fails the run.
 """
 import json
 import os
-import shutil
 import site
 import subprocess
 import zipfile
@@ -81,3 +80,26 @@ def scene_dir(qgis_process, tmp_path_factory) -> Path:
     qgis_process.run("syntheticroadscene", WIDTH=300, HEIGHT=300, SEED=3, DENSITY=2,
                      PIXEL=1.0, OUTPUT_FOLDER=out)
     return out
+
+
+@pytest.fixture(scope="session")
+def run_algorithm(qgis_app):
+    """``run_algorithm(name, params, feedback=None)``: a gisroads algorithm run in this
+    process (prepare + runPrepared), for tests of cancel and of in-process conversions."""
+    from qgis.core import QgsApplication, QgsProcessingContext, QgsProcessingFeedback
+
+    from processing_provider.provider import GisroadsProvider
+
+    provider = GisroadsProvider()
+    registry = QgsApplication.processingRegistry()
+    registry.addProvider(provider)
+
+    def run(name, params, feedback=None):
+        algorithm = registry.createAlgorithmById(f"gisroads:{name}")
+        context = QgsProcessingContext()
+        feedback = feedback or QgsProcessingFeedback()
+        assert algorithm.prepare(params, context, feedback)
+        return algorithm.runPrepared(params, context, feedback)
+
+    yield run
+    registry.removeProvider(provider)

@@ -5,8 +5,7 @@ import pytest
 import shapely
 from affine import Affine
 from pyproj import CRS
-from qgis.core import (QgsApplication, QgsProcessingContext, QgsProcessingException,
-                       QgsProcessingFeedback)
+from qgis.core import QgsProcessingException
 
 from gisroads.geo import GeoRaster
 from gisroads.io.raster import write_geotiff
@@ -91,34 +90,22 @@ def test_a_building_in_the_dsm_blocks_the_gap_a_tree_does_not(qgis_process, tmp_
     assert sorted(strings.part_ids) == ["1", "2", "3,4"]
 
 
-@pytest.fixture(scope="module")
-def registry(qgis_app):
-    from processing_provider.provider import GisroadsProvider
-    provider = GisroadsProvider()
-    QgsApplication.processingRegistry().addProvider(provider)
-    yield QgsApplication.processingRegistry()
-    QgsApplication.processingRegistry().removeProvider(provider)
+def run_in_process(run_algorithm, **params):
+    return run_algorithm("subgraphlinking", {k: str(v) for k, v in params.items()})
 
 
-def run_in_process(registry, **params):
-    algorithm = registry.createAlgorithmById("gisroads:subgraphlinking")
-    params = {k: str(v) for k, v in params.items()}
-    context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
-    assert algorithm.prepare(params, context, feedback)
-    return algorithm.runPrepared(params, context, feedback)
-
-
-def test_edited_gap_edges_override_the_program(registry, tmp_path):
+def test_edited_gap_edges_override_the_program(run_algorithm, tmp_path):
     parts = write_parts(tmp_path / "parts.gpkg", [
         (1, [(0, 0), (50, 0)], 6.0, 0.9), (2, [(60, 0), (110, 0)], 6.0, 0.8),
         (3, [(58, 3), (58 + 50 * COS20, 3 + 50 * SIN20)], 4.0, 0.7)])
-    run_in_process(registry, ROAD_PARTS=parts, GAP_EDGES=tmp_path / "gaps.gpkg",
+    run_in_process(run_algorithm, ROAD_PARTS=parts, GAP_EDGES=tmp_path / "gaps.gpkg",
                    ROAD_STRINGS=tmp_path / "strings.gpkg")
     edited = gpd.read_file(tmp_path / "gaps.gpkg")
     assert edited.selected.tolist() == [True, False]
     edited["selected"] = [False, True]           # the user prefers the branch
     write_geopackage(tmp_path / "edited.gpkg", {"gap_edges": edited})
-    result = run_in_process(registry, ROAD_PARTS=parts, EDITED_GAP_EDGES=tmp_path / "edited.gpkg",
+    result = run_in_process(run_algorithm, ROAD_PARTS=parts,
+                            EDITED_GAP_EDGES=tmp_path / "edited.gpkg",
                             GAP_EDGES=tmp_path / "gaps2.gpkg",
                             ROAD_STRINGS=tmp_path / "strings2.gpkg")
     assert (result["SELECTED"], result["STRINGS"]) == (1, 2)
@@ -126,18 +113,19 @@ def test_edited_gap_edges_override_the_program(registry, tmp_path):
     edited["selected"] = True                     # both at part 1's end: refused
     write_geopackage(tmp_path / "edited.gpkg", {"gap_edges": edited})
     with pytest.raises(QgsProcessingException, match="part 1 end 1 has more than one"):
-        run_in_process(registry, ROAD_PARTS=parts, EDITED_GAP_EDGES=tmp_path / "edited.gpkg",
+        run_in_process(run_algorithm, ROAD_PARTS=parts,
+                       EDITED_GAP_EDGES=tmp_path / "edited.gpkg",
                        GAP_EDGES=tmp_path / "gaps3.gpkg", ROAD_STRINGS=tmp_path / "s3.gpkg")
 
 
-def test_a_dsm_alone_gives_the_context_in_process(registry, tmp_path):
+def test_a_dsm_alone_gives_the_context_in_process(run_algorithm, tmp_path):
     parts = write_parts(tmp_path / "parts.gpkg", [(1, [(0, 0), (40, 0)], 6.0, 0.9),
                                                   (2, [(60, 0), (100, 0)], 6.0, 0.9)])
     heights = np.zeros((40, 120), np.float32)          # x -10..110, y -20..20
     heights[15:25, 55:65] = 8.0                        # a building in the gap
     write_geotiff(tmp_path / "dsm.tif",
                   GeoRaster(heights, Affine(1, 0, -10, 0, -1, 20), CRS(EPSG)))
-    result = run_in_process(registry, ROAD_PARTS=parts, DSM=tmp_path / "dsm.tif",
+    result = run_in_process(run_algorithm, ROAD_PARTS=parts, DSM=tmp_path / "dsm.tif",
                             GAP_EDGES=tmp_path / "gaps.gpkg",
                             ROAD_STRINGS=tmp_path / "strings.gpkg")
     assert (result["SELECTED"], result["STRINGS"]) == (0, 2)

@@ -4,56 +4,37 @@ from pathlib import Path
 import geopandas as gpd
 import pytest
 import shapely
-from qgis.core import (QgsApplication, QgsProcessingContext, QgsProcessingException,
-                       QgsProcessingFeedback, QgsVectorLayer)
+from qgis.core import QgsProcessingException, QgsProcessingFeedback, QgsVectorLayer
 
 from gisroads.synthetic import make_scene
 from gisroads.synthetic.image import write_image
 from processing_provider.convert import source_to_frame, to_pyproj, to_qgis
-from processing_provider.provider import GisroadsProvider
 
 STYLES = Path(__file__).resolve().parents[2] / "styles"
 
 
-@pytest.fixture(scope="module")
-def registry(qgis_app):
-    provider = GisroadsProvider()
-    QgsApplication.processingRegistry().addProvider(provider)
-    yield QgsApplication.processingRegistry()
-    QgsApplication.processingRegistry().removeProvider(provider)
-
-
-def run(registry, name, params, feedback=None):
-    algorithm = registry.createAlgorithmById(f"gisroads:{name}")
-    context = QgsProcessingContext()
-    feedback = feedback or QgsProcessingFeedback()
-    ok = algorithm.prepare(params, context, feedback)
-    assert ok
-    return algorithm.runPrepared(params, context, feedback)
-
-
-def test_cancel_before_start_writes_nothing(registry, tmp_path):
+def test_cancel_before_start_writes_nothing(run_algorithm, tmp_path):
     feedback = QgsProcessingFeedback()
     feedback.cancel()
     with pytest.raises(QgsProcessingException, match="cancelled"):
-        run(registry, "syntheticroadscene",
+        run_algorithm("syntheticroadscene",
             {"WIDTH": 300, "HEIGHT": 300, "DENSITY": 1, "PIXEL": 2.0,
              "OUTPUT_FOLDER": str(tmp_path / "out")}, feedback)
     assert not list((tmp_path / "out").glob("*"))
 
 
-def test_cancel_while_writing_the_cloud_leaves_no_partial_file(registry, tmp_path):
+def test_cancel_while_writing_the_cloud_leaves_no_partial_file(run_algorithm, tmp_path):
     feedback = QgsProcessingFeedback()
     feedback.progressChanged.connect(lambda percent: percent > 20 and feedback.cancel())
     with pytest.raises(QgsProcessingException, match="cancelled"):
-        run(registry, "syntheticroadscene",
+        run_algorithm("syntheticroadscene",
             {"WIDTH": 400, "HEIGHT": 400, "DENSITY": 4, "PIXEL": 2.0,
              "OUTPUT_FOLDER": str(tmp_path / "out")}, feedback)
     # truth.gpkg is complete before the cloud starts; the cloud is absent, not partial
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["truth.gpkg"]
 
 
-def test_cancel_during_the_imagery_pipeline_leaves_no_output(registry, tmp_path):
+def test_cancel_during_the_imagery_pipeline_leaves_no_output(run_algorithm, tmp_path):
     write_image(make_scene(seed=1, size_m=(300.0, 300.0)), tmp_path / "image.tif",
                 tmp_path / "dsm.tif", pixel_m=2.0)
     feedback = QgsProcessingFeedback()
@@ -61,7 +42,7 @@ def test_cancel_during_the_imagery_pipeline_leaves_no_output(registry, tmp_path)
     feedback.progressChanged.connect(
         lambda percent: (percents.append(percent), percent > 45 and feedback.cancel()))
     with pytest.raises(QgsProcessingException, match="cancelled"):
-        run(registry, "imageryroadnetwork", {"INPUT": str(tmp_path / "image.tif"),
+        run_algorithm("imageryroadnetwork", {"INPUT": str(tmp_path / "image.tif"),
                                              "OUTPUT": str(tmp_path / "roads.gpkg")}, feedback)
     assert 45 < max(percents) < 100
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dsm.tif", "image.tif"]
