@@ -8,6 +8,7 @@ file's own CRS, which is the CRS outputs are written in.
 """
 from __future__ import annotations
 
+from copy import deepcopy
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
@@ -71,13 +72,35 @@ class PointCloud:
         return len(self.xyz)
 
 
+#: LASzip's first compressor: the points of the whole file form one stream that starts right
+#: at the point-data offset, with no chunk table and no offset to one (LAS 1.0-1.2 era).
+_LASZIP_POINTWISE = 1
+
+
+def _laszip_compressor(header: laspy.LasHeader) -> int | None:
+    """The compressor code of a LAZ file's LASzip VLR (1 pointwise, 2 pointwise chunked,
+    3 layered chunked), or None when the file has no LASzip VLR."""
+    laszip = header.vlrs.get("LasZipVlr")
+    return int.from_bytes(laszip[0].record_data[:2], "little") if laszip else None
+
+
 def _check_structure(path: Path, header: laspy.LasHeader) -> None:
-    """Refuse empty and truncated files from the header alone (no point is decoded)."""
+    """Refuse empty and truncated files from the header alone (no point is decoded).
+
+    A chunked LAZ file cut short has lost the chunk table its first 8 point bytes point to.
+    A pointwise LAZ file has no chunk table, so its truncation shows only when its points
+    are decoded (:func:`iter_las_chunks` reports it as corrupt point data).
+    """
     size = path.stat().st_size
     if header.point_count == 0:
         raise LasError(f"{path}: the file holds no points")
     start = header.offset_to_point_data
     if header.are_points_compressed:
+        if _laszip_compressor(header) == _LASZIP_POINTWISE:
+            # Its first point is stored raw: at least that much must follow the header.
+            if size < start + header.point_format.size:
+                raise LasError(f"{path}: truncated LAZ file (no point data)")
+            return
         with open(path, "rb") as f:
             f.seek(start)
             raw = f.read(8)
@@ -109,6 +132,11 @@ def _open(path) -> laspy.LasReader:
     except LasError:
         reader.close()
         raise
+    if reader.header.are_points_compressed and \
+            _laszip_compressor(reader.header) == _LASZIP_POINTWISE:
+        # lazrs's parallel decoder needs a chunk table; laspy would try it first and log
+        # its failure before falling back. The decoder is made on the first read.
+        reader.laz_backend = laspy.LazBackend.Lazrs
     return reader
 
 
@@ -355,7 +383,8 @@ def write_classified(source, target, classify: Callable[[PointCloud], np.ndarray
                      chunk_size: int = DEFAULT_CHUNK) -> int:
     """Copy a LAS/LAZ file with a new classification, chunk by chunk, atomically.
 
-    Every other attribute, VLR and the point format are kept as they are.
+    Every other attribute, VLR and the point format are kept as they are; a LAS 1.0 file
+    is written as LAS 1.2 (the same point layouts; laspy writes no 1.0).
 
     Parameters
     ----------
@@ -376,7 +405,11 @@ def write_classified(source, target, classify: Callable[[PointCloud], np.ndarray
         units = las_units(reader.header, source_crs)
         crs = metre_crs(source_crs, units)
         compressed = target.suffix.lower() == ".laz"
-        with laspy.open(tmp, mode="w", header=reader.header, do_compress=compressed) as writer:
+        header = reader.header
+        if header.version.minor == 0:  # laspy writes no LAS 1.0; 1.2 has its point layouts
+            header = deepcopy(header)
+            header.version = laspy.header.Version(1, 2)
+        with laspy.open(tmp, mode="w", header=header, do_compress=compressed) as writer:
             for points in reader.chunk_iterator(chunk_size):
                 new = np.asarray(classify(_cloud_from_points(points, crs, source_crs, units)),
                                  dtype=np.uint8)

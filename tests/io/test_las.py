@@ -1,4 +1,6 @@
+import io
 import shutil
+import struct
 
 import laspy
 import numpy as np
@@ -67,8 +69,9 @@ POINT_FORMATS = [("1.2", pf) for pf in range(4)] + [("1.3", pf) for pf in range(
     [("1.4", pf) for pf in range(11)]
 
 
+@pytest.mark.parametrize("suffix", ["las", "laz"])
 @pytest.mark.parametrize("version,point_format", POINT_FORMATS)
-def test_every_version_and_point_format(tmp_path, version, point_format):
+def test_every_version_and_point_format(tmp_path, version, point_format, suffix):
     header = laspy.LasHeader(point_format=point_format, version=version)
     header.scales = [0.01, 0.01, 0.01]
     las = laspy.LasData(header)
@@ -76,8 +79,9 @@ def test_every_version_and_point_format(tmp_path, version, point_format):
     las.x, las.y, las.z = rng.uniform(0, 100, (3, 500))
     las.intensity = rng.integers(0, 4000, 500)
     las.classification = np.full(500, 2)
-    path = tmp_path / f"pf{point_format}.las"
+    path = tmp_path / f"pf{point_format}.{suffix}"
     las.write(path)
+    assert las_info(path)["format"] == suffix.upper()
     cloud = read_las(path)
     np.testing.assert_allclose(cloud.xyz[:, 0], las.x, atol=0.005)
     np.testing.assert_array_equal(cloud.intensity, las.intensity)
@@ -100,6 +104,86 @@ def test_las_1_0(tmp_path):
     cloud = read_las(tmp_path / "v10.las")
     np.testing.assert_allclose(cloud.xyz[:, 1], np.arange(5.0) * 2)
     assert cloud.intensity.tolist() == [100, 101, 102, 103, 104]
+
+
+def pointwise_laz(chunked: bytes) -> bytes:
+    """A LAZ file of LASzip's first, pointwise compressor, from a one-chunk LAZ file.
+
+    In both layouts a chunk is the first point raw and then the arithmetic-coded rest; the
+    pointwise file is that stream alone, right at the point-data offset, where the chunked
+    file puts the 8-byte offset of its chunk table before the points and the table after
+    them. The LASzip VLR's first field (after its 54-byte VLR header) is the compressor code.
+    """
+    header = laspy.LasHeader.read_from(io.BytesIO(chunked))
+    start = header.offset_to_point_data
+    (chunk_table,) = struct.unpack_from("<q", chunked, start)
+    data = bytearray(chunked[:start] + chunked[start + 8:chunk_table])
+    laszip_record = chunked.index(b"laszip encoded") - 2 + 54
+    assert struct.unpack_from("<H", data, laszip_record) == (2,)  # pointwise chunked
+    struct.pack_into("<H", data, laszip_record, 1)
+    return bytes(data)
+
+
+def as_version_1_0_or_1_1(data: bytes, minor: int) -> bytes:
+    """A LAS 1.2 file with point format 0 or 1 relabelled 1.0 or 1.1 (the same layout): the
+    minor version byte (offset 25) set and the global encoding that 1.0 reserves zeroed."""
+    data = bytearray(data)
+    data[6:8] = b"\0\0"
+    data[25] = minor
+    return bytes(data)
+
+
+@pytest.mark.parametrize("version,point_format", [("1.0", 1), ("1.1", 0), ("1.2", 0),
+                                                  ("1.2", 1), ("1.2", 2), ("1.2", 3)])
+def test_pointwise_laz_reads_the_points_of_its_las(tmp_path, version, point_format):
+    las = laspy.LasData(laspy.LasHeader(point_format=point_format, version="1.2"))
+    las.header.scales, las.header.offsets = [0.01] * 3, [500000.0, 4500000.0, 0.0]
+    rng = np.random.default_rng(point_format)
+    las.x = 500000 + rng.uniform(0, 100, 3000)
+    las.y = 4500000 + rng.uniform(0, 60, 3000)
+    las.z = rng.uniform(0, 5, 3000)
+    las.intensity = rng.integers(0, 4000, 3000)
+    las.classification = rng.integers(1, 3, 3000)
+    las.write(tmp_path / "source.las")
+    las.write(tmp_path / "chunked.laz")
+    data = pointwise_laz((tmp_path / "chunked.laz").read_bytes())
+    if version != "1.2":
+        data = as_version_1_0_or_1_1(data, int(version[-1]))
+    path = tmp_path / "pointwise.laz"
+    path.write_bytes(data)
+    # the 8 bytes after the point-data offset are now coordinates of the first point
+    start = laspy.LasHeader.read_from(io.BytesIO(data)).offset_to_point_data
+    assert not start < struct.unpack_from("<q", data, start)[0] < len(data)
+
+    info = las_info(path)
+    assert (info["format"], info["version"], info["point_count"]) == ("LAZ", version, 3000)
+    expected = read_las(tmp_path / "source.las")
+    cloud = read_las(path)
+    np.testing.assert_array_equal(cloud.xyz, expected.xyz)
+    np.testing.assert_array_equal(cloud.intensity, expected.intensity)
+    np.testing.assert_array_equal(cloud.classification, expected.classification)
+    chunks = list(iter_las_chunks(path, chunk_size=700))
+    assert [len(c) for c in chunks] == [700] * 4 + [200]
+    np.testing.assert_array_equal(np.concatenate([c.xyz for c in chunks]), expected.xyz)
+    changed = write_classified(path, tmp_path / "tagged.laz",
+                               lambda c: np.where(c.xyz[:, 0] < 500050, 11, c.classification))
+    assert changed == np.count_nonzero(expected.xyz[:, 0] < 500050)
+    np.testing.assert_array_equal(read_las(tmp_path / "tagged.laz").xyz, expected.xyz)
+
+
+def test_truncated_pointwise_laz_is_refused_when_decoded(tmp_path):
+    las = laspy.LasData(laspy.LasHeader(point_format=1, version="1.2"))
+    las.x, las.y, las.z = np.random.default_rng(0).uniform(0, 100, (3, 3000))
+    las.write(tmp_path / "chunked.laz")
+    data = pointwise_laz((tmp_path / "chunked.laz").read_bytes())
+    (tmp_path / "cut.laz").write_bytes(data[:len(data) // 2])
+    with pytest.raises(LasError, match="corrupt point data"):
+        read_las(tmp_path / "cut.laz")
+    # cut inside its first, raw point: nothing to decode, refused from the header
+    start = laspy.LasHeader.read_from(io.BytesIO(data)).offset_to_point_data
+    (tmp_path / "cut.laz").write_bytes(data[:start + 10])
+    with pytest.raises(LasError, match="truncated LAZ file"):
+        las_info(tmp_path / "cut.laz")
 
 
 def test_file_without_intensity_reports_none(tmp_path):
