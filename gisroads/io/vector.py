@@ -3,17 +3,23 @@
 A GeoPackage is written to a temporary file beside the target and renamed over it only when
 every layer and style is in, so a failure or a cancel never leaves a half-written file.
 Layer styles are stored the way QGIS stores them (the ``layer_styles`` table, one default
-style per layer), so QGIS opens every layer styled.
+style per layer), so QGIS opens every layer styled. An empty layer is written with the
+geometry type its contract or its style names (not GeoPackage's catch-all ``GEOMETRY``), so
+QGIS opens it as a point, line or polygon layer, not as a table.
 """
 from __future__ import annotations
 
 import os
+import re
 import sqlite3
 import tempfile
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
 import geopandas as gpd
+
+from ..geo import CONTRACT_GEOMETRY
 
 STYLES_DIR = Path(__file__).resolve().parents[2] / "styles"
 """QML files, one per layer name (``road_centrelines.qml`` ...). In the assembled QGIS plugin
@@ -44,6 +50,34 @@ def style_for(layer_name: str, styles_dir: Path = STYLES_DIR) -> str | None:
     """QML text for a layer name, or None when styles/ has no ``<layer_name>.qml``."""
     path = Path(styles_dir) / f"{layer_name}.qml"
     return path.read_text(encoding="utf-8") if path.exists() else None
+
+
+#: Geometry type of the features a QGIS symbol type draws.
+_SYMBOL_GEOMETRY = {"marker": "Point", "line": "LineString", "fill": "Polygon"}
+
+
+def declared_geometry_type(layer_name: str, styles_dir: Path = STYLES_DIR) -> str | None:
+    """The geometry type a layer holds by its name: a contract layer's (``road_centrelines``
+    LineString, ``road_polygons`` Polygon, ``junctions`` Point), else the one its style's
+    symbol draws; None when neither says."""
+    if layer_name in CONTRACT_GEOMETRY:
+        return CONTRACT_GEOMETRY[layer_name]
+    qml = style_for(layer_name, styles_dir)
+    symbol = re.search(r'<symbol\b[^>]*\btype="(\w+)"', qml) if qml else None
+    return _SYMBOL_GEOMETRY.get(symbol.group(1)) if symbol else None
+
+
+def _declare_geometry_types(gpkg: Path, types: dict[str, str]) -> None:
+    """Give empty layers their geometry type: writers declare an empty layer ``GEOMETRY``
+    (any type), which QGIS opens as a table."""
+    con = sqlite3.connect(gpkg)
+    try:
+        con.executemany("UPDATE gpkg_geometry_columns SET geometry_type_name = ?"
+                        " WHERE table_name = ? AND geometry_type_name = 'GEOMETRY'",
+                        [(kind.upper(), table) for table, kind in types.items()])
+        con.commit()
+    finally:
+        con.close()
 
 
 def _store_styles(gpkg: Path, styles: dict[str, str]) -> None:
@@ -81,7 +115,8 @@ def write_geopackage(path, layers: dict[str, gpd.GeoDataFrame], *,
     path : str or Path
         Target ``.gpkg``; replaced whole if it exists.
     layers : dict of str to GeoDataFrame
-        Layer name to frame. Empty frames are written as empty layers with their schema.
+        Layer name to frame. Empty frames are written as empty layers with their schema and
+        the geometry type of :func:`declared_geometry_type`.
     styles_dir : Path
         Folder of ``<layer>.qml`` styles; layers without a file are stored unstyled.
 
@@ -95,8 +130,15 @@ def write_geopackage(path, layers: dict[str, gpd.GeoDataFrame], *,
     if not layers:
         raise ValueError("write_geopackage needs at least one layer")
     with atomic_path(path) as tmp:
-        for name, frame in layers.items():
-            frame.to_file(tmp, layer=name, driver="GPKG")
+        with warnings.catch_warnings():
+            # geopandas' Fiona writer warns that an empty frame may fail: it is intended here
+            warnings.filterwarnings("ignore", "You are attempting to write an empty DataFrame")
+            for name, frame in layers.items():
+                frame.to_file(tmp, layer=name, driver="GPKG")
+        empty_types = {n: kind for n, frame in layers.items() if len(frame) == 0
+                       and (kind := declared_geometry_type(n, styles_dir)) is not None}
+        if empty_types:
+            _declare_geometry_types(tmp, empty_types)
         styles = {n: q for n in layers if (q := style_for(n, styles_dir)) is not None}
         if styles:
             _store_styles(tmp, styles)

@@ -52,3 +52,33 @@ def test_read_layer_reprojects_and_refuses_bad_paths(tmp_path):
         read_layer(tmp_path / "none.gpkg")
     with pytest.raises(ValueError, match=".gpkg"):
         write_geopackage(tmp_path / "n.shp", small_network().layers())
+
+
+def geometry_types(path) -> dict[str, str]:
+    con = sqlite3.connect(path)
+    try:
+        return dict(con.execute("SELECT table_name, geometry_type_name"
+                                " FROM gpkg_geometry_columns").fetchall())
+    finally:
+        con.close()
+
+
+def test_empty_layers_keep_their_geometry_type(tmp_path):
+    net = small_network()
+    single = network_from_centrelines(net.centrelines.iloc[:1])  # one road: no junction
+    empty = network_from_centrelines(net.centrelines.iloc[:0])
+    empty.qa = {"rectangles": gpd.GeoDataFrame(geometry=[], crs=net.crs),
+                "gap_edges": gpd.GeoDataFrame(geometry=[], crs=net.crs),
+                "unstyled": gpd.GeoDataFrame(geometry=[], crs=net.crs)}
+    write_geopackage(tmp_path / "single.gpkg", single.layers())
+    write_geopackage(tmp_path / "empty.gpkg", empty.layers())
+    assert len(single.junctions) == 0
+    assert geometry_types(tmp_path / "single.gpkg") == {
+        "road_centrelines": "LINESTRING", "road_polygons": "POLYGON", "junctions": "POINT"}
+    # QA layers take the type their style draws; a layer nothing describes stays GEOMETRY
+    assert geometry_types(tmp_path / "empty.gpkg") == {
+        "road_centrelines": "LINESTRING", "road_polygons": "POLYGON", "junctions": "POINT",
+        "rectangles": "POLYGON", "gap_edges": "LINESTRING", "unstyled": "GEOMETRY"}
+    back = read_layer(tmp_path / "empty.gpkg", "road_centrelines")
+    assert len(back) == 0 and back.crs.to_epsg() == 32754
+    assert set(back.columns) >= {"road_id", "width_m", "length_m", "method", "score"}
