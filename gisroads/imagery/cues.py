@@ -430,3 +430,13 @@ def image_cues(image: GeoRaster, *, nir_band: int | None = None,
         kind=kind, nir_band=nir_band,
         **(dict(exg=excess_green(image), saturation=saturation(image))
            if kind == "rgb" and nir_band not in (1, 2, 3) else {}))
+
+
+def context_rasters(cues) -> dict:
+    """The rasters of :func:`gisroads.network.subgraph.gap_context` from a :class:`ImageCues`:
+    ``ndvi``, ``ndsm``, ``intensity``, and ``rgb`` (the first three non-NIR bands, taken as
+    red, green, blue) for an RGB image; panchromatic and CIR images have no ``rgb``."""
+    visible = [band for number, band in enumerate(cues.bands, start=1)
+               if number != cues.nir_band]
+    rgb = np.stack(visible[:3]) if cues.kind == "rgb" and len(visible) >= 3 else None
+    return {"ndvi": cues.ndvi, "ndsm": cues.ndsm, "intensity": cues.intensity, "rgb": rgb}

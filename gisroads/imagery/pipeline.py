@@ -3,8 +3,8 @@
 NCut over-segmentation (:mod:`gisroads.imagery.segments`) -> grouping, with the splitting of
 branching segments (:mod:`gisroads.segmentation.grouping`) -> road-part shape filtering
 (:mod:`gisroads.imagery.roadparts`) -> subgraph generation and the integer program over gap
-edges (:mod:`gisroads.imagery.subgraph`) -> road strings to a network with junctions
-(:mod:`gisroads.imagery.network`). Each stage is a function of its own; this module only
+edges (:mod:`gisroads.network.subgraph`) -> road strings to a network with junctions
+(:mod:`gisroads.network.junctions`). Each stage is a function of its own; this module only
 chains them and times them.
 
 Distances are metres: the stages' defaults are the paper's (its images had 8-10 cm pixels),
@@ -21,11 +21,11 @@ import numpy as np
 from ..geo import GeoRaster, RoadNetwork
 from ..progress import Progress, report, scaled
 from ..segmentation.grouping import group_segments
-from .cues import image_cues
-from .network import strings_to_network
+from .cues import context_rasters, image_cues
+from ..network.junctions import strings_to_network
 from .roadparts import extract_road_parts
 from .segments import edge_strength, segment_image
-from .subgraph import context_rasters, link_road_parts
+from ..network.subgraph import link_road_parts
 
 METHOD = "grote-rottensteiner"
 
@@ -62,9 +62,9 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
         :func:`gisroads.imagery.segments.default_counts`.
     road_part_criteria, gap_options, weight_options, network_options : dict, optional
         Thresholds of :func:`gisroads.imagery.roadparts.filter_road_parts`,
-        :func:`gisroads.imagery.subgraph.gap_edges`,
-        :func:`gisroads.imagery.subgraph.edge_weights` and
-        :func:`gisroads.imagery.network.strings_to_network`.
+        :func:`gisroads.network.subgraph.gap_edges`,
+        :func:`gisroads.network.subgraph.edge_weights` and
+        :func:`gisroads.network.junctions.strings_to_network`.
     progress : callable, optional
         ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
 

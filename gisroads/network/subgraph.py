@@ -709,16 +709,6 @@ def road_strings(road_parts: gpd.GeoDataFrame, gaps: gpd.GeoDataFrame) -> gpd.Ge
     return gpd.GeoDataFrame(frame, geometry=geometries, crs=road_parts.crs)
 
 
-def context_rasters(cues) -> dict:
-    """The rasters of :func:`gap_context` from a :class:`gisroads.imagery.cues.ImageCues`:
-    ``ndvi``, ``ndsm``, ``intensity``, and ``rgb`` (the first three non-NIR bands, taken as
-    red, green, blue) for an RGB image; panchromatic and CIR images have no ``rgb``."""
-    visible = [band for number, band in enumerate(cues.bands, start=1)
-               if number != cues.nir_band]
-    rgb = np.stack(visible[:3]) if cues.kind == "rgb" and len(visible) >= 3 else None
-    return {"ndvi": cues.ndvi, "ndsm": cues.ndsm, "intensity": cues.intensity, "rgb": rgb}
-
-
 def link_road_parts(road_parts: gpd.GeoDataFrame, *, transform: Affine | None = None,
                     ndvi=None, ndsm=None, intensity=None, rgb=None,
                     gap_options: dict | None = None, context_options: dict | None = None,

@@ -3,7 +3,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingPa
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber)
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
-from gisroads.imagery.network import (BORDER_M, COLLINEAR_DEG, DEFAULT_QUALITY,
+from gisroads.network.junctions import (BORDER_M, COLLINEAR_DEG, DEFAULT_QUALITY,
                                       DEFAULT_WIDTH_M, MAX_SEARCH_RADIUS_M,
                                       MIN_SEARCH_RADIUS_M, MIN_TOTAL_LENGTH_M, OVERLAP_SHARE,
                                       TOLERANCE_M, road_strings_from_lines,

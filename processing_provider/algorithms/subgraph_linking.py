@@ -4,10 +4,10 @@ from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutpu
                        QgsProcessingParameterFeatureSink, QgsProcessingParameterFeatureSource,
                        QgsProcessingParameterNumber)
 
-from gisroads.imagery.cues import image_cues, normalised_dsm
-from gisroads.imagery.subgraph import (MAX_DIRECTION_DIFF_RAD, MAX_GAP_M, MAX_GAP_RELATIVE,
+from gisroads.imagery.cues import context_rasters, image_cues, normalised_dsm
+from gisroads.network.subgraph import (MAX_DIRECTION_DIFF_RAD, MAX_GAP_M, MAX_GAP_RELATIVE,
                                        MAX_LATERAL_OFFSET_M, MAX_OVERLAP_M, SMALL_GAP_M,
-                                       context_rasters, link_road_parts, road_strings)
+                                       link_road_parts, road_strings)
 
 from ..convert import (frame_to_sink, gisroads_errors, progress_callback, source_to_frame,
                        style_on_load)

@@ -10,7 +10,7 @@ from shapely.ops import substring
 
 from gisroads.evaluate import evaluate_network
 from gisroads.geo import line_end_degrees, node_lines
-from gisroads.imagery.network import (approximate_strings, find_junctions,
+from gisroads.network.junctions import (approximate_strings, find_junctions,
                                       merge_close_junctions, remove_duplicates, road_regions,
                                       road_strings_from_lines, significant_components,
                                       strings_to_network)

@@ -6,7 +6,7 @@ import shapely
 import shapely.ops
 from affine import Affine
 
-from gisroads.imagery.subgraph import (edge_weights, gap_context, gap_edges, link_road_parts,
+from gisroads.network.subgraph import (edge_weights, gap_context, gap_edges, link_road_parts,
                                        linear_weight, road_strings, select_gap_edges)
 
 CRS = "EPSG:32633"
@@ -387,7 +387,7 @@ def _score_links(parts, gaps):
 
 
 def test_synthetic_scene_links_road_gaps_and_rejects_links_through_buildings(scene_parts):
-    from gisroads.imagery.subgraph import context_rasters
+    from gisroads.imagery.cues import context_rasters
     parts, image, dsm, image_cues = scene_parts
     cues = image_cues(image, nir_band=4, dsm=dsm)
     gaps, strings = link_road_parts(parts, transform=image.transform, **context_rasters(cues))
@@ -406,7 +406,7 @@ def test_synthetic_scene_links_road_gaps_and_rejects_links_through_buildings(sce
 
 def test_synthetic_scene_rgb_only_uses_colour_vegetation(scene_parts):
     from gisroads.geo import GeoRaster
-    from gisroads.imagery.subgraph import context_rasters
+    from gisroads.imagery.cues import context_rasters
     parts, image, _, image_cues = scene_parts
     rgb = image_cues(GeoRaster(image.data[:3], image.transform, image.crs))
     gaps, _ = link_road_parts(parts, transform=image.transform, **context_rasters(rgb))

@@ -1,0 +1,517 @@
+"""Any road raster to a clean, connected road network.
+
+A road raster is a binary mask or a road probability (0-1, or 0-255 for 8-bit images): a
+deep-learning segmentation, a classified land-cover map, a thresholded index, the LiDAR
+road evidence or the imagery road cue of this project. The stages, each callable alone:
+
+:func:`road_probability`
+    The raster as a probability in [0, 1], NaN where there is no data.
+:func:`road_mask`
+    Smoothed, thresholded and cleaned: holes up to ``max_hole_m2`` filled (a car, a tree
+    crown, salt noise inside a road), components under ``min_area_m2`` dropped (salt
+    noise and small blobs outside the roads).
+:func:`skeleton_parts`
+    Tile by tile (``tile_px`` with ``overlap_px`` of context, the cores stitched exactly
+    as the LiDAR tiles are), the mask's skeleton with the width at every skeleton pixel
+    from the distance transform; then, on the whole network of vectors: spurs pruned
+    (end branches shorter than the local half width plus ``spur_m``: the skeleton's twigs
+    towards corners and bumps of the border), junction pixel clusters contracted into one
+    node (junctions joined by less than ``junction_merge_m``), the last ``straighten``
+    half widths of every branch at a junction replaced by a straight segment to the node
+    (the skeleton bends towards the junction's centre of mass), lines split at junctions
+    and merged through nodes of degree 2, then simplified (Douglas-Peucker,
+    ``simplify_m``). Every part carries its mean width and its mean probability
+    (``quality``).
+:func:`link_gaps`
+    The gap edges of :mod:`gisroads.network.subgraph` between dead ends only (an end
+    already at a junction is connected), weighted by the geometry of the gap and by the
+    raster's own road probability along it (sub-threshold evidence plays the part of the
+    paper's occlusion share), and chosen by the integer program: a road cut by a tree, a
+    car or a bridge shadow is bridged when its continuation is smooth.
+:func:`raster_to_network`
+    The composition, ending in the network generation of
+    :mod:`gisroads.network.junctions`: junctions built from the remaining dead ends (T
+    junctions across a cut next to the crossing road), duplicates removed, insignificant
+    components (false blobs) dropped, lines split at junctions with a shared vertex at every
+    T. QA layers: ``gap_edges`` (weights and ``selected``), ``junction_connections`` and
+    ``rejected`` (pieces dropped, with a ``reason``).
+
+Every distance is in metres, so one set of defaults serves 0.3-1 m pixels.
+"""
+from __future__ import annotations
+
+import geopandas as gpd
+import numpy as np
+import pandas as pd
+import shapely
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from ..geo import GeoRaster, RoadNetwork
+from ..progress import Progress, report, scaled
+from ..vectorize.ribbons import node_roads
+from ..vectorize.skeleton import skeleton_lines
+from .junctions import merge_close_junctions, strings_to_network
+from .subgraph import edge_weights, gap_edges, road_strings, select_gap_edges
+
+METHOD = "road-raster"
+#: Pixels at or above this probability are road.
+THRESHOLD = 0.5
+#: Gaussian smoothing of the probability before the threshold (sigma, metres): ragged
+#: borders of a classifier's output would grow spurs.
+SMOOTH_M = 1.0
+#: Holes of the mask up to this area are filled (cars, tree crowns, noise), square metres.
+MAX_HOLE_M2 = 50.0
+#: Components of the mask under this area are noise, square metres.
+MIN_AREA_M2 = 40.0
+#: An end branch shorter than the half width of the widest road at its junction plus this
+#: is a spur, metres (as the reference centre lines of mask datasets are pruned).
+SPUR_M = 5.0
+#: Junctions joined by a line shorter than this are one junction, metres.
+JUNCTION_MERGE_M = 4.0
+#: Branches at a junction are straight over this many half widths of the widest road there.
+STRAIGHTEN = 1.5
+#: Douglas-Peucker tolerance of the centre lines, metres.
+SIMPLIFY_M = 0.5
+#: Isolated lines shorter than this are dropped, metres.
+MIN_LENGTH_M = 10.0
+#: An isolated string shorter than this many times its width is a blob, not a road.
+MIN_ELONGATION = 2.0
+#: Tiles of this many pixels a side, with this much context on each side.
+TILE_PX = 2048
+OVERLAP_PX = 128
+#: Gap edges between dead ends: as the imagery's subgraph generation, with a lateral offset
+#: allowed up to a road's width (a cut road's two ends are skeletonised independently).
+GAP_OPTIONS = {"max_gap_m": 40.0, "max_direction_diff_rad": np.radians(35.0),
+               "max_lateral_offset_m": 5.0}
+
+_SEAM_SNAP_PX = 1.5
+
+
+def road_probability(raster: GeoRaster, *, band: int = 1) -> GeoRaster:
+    """The road probability of a raster, in [0, 1], NaN where there is no data.
+
+    Parameters
+    ----------
+    raster : GeoRaster
+        2-D, or ``(bands, rows, cols)``. Values 0-1 (a probability or a 0/1 mask), or 0-255
+        (an 8-bit mask or probability; read whenever a value exceeds 1). ``nodata`` and NaN
+        mark no data.
+    band : int
+        1-based band of a multi-band raster.
+
+    Raises
+    ------
+    ValueError
+        A band that does not exist, values below 0 or above 255, no valid pixel, or a
+        geographic CRS (reproject to metres first).
+    """
+    if raster.crs is not None and not raster.crs.is_projected:
+        raise ValueError("the road raster must be in a projected CRS in metres (reproject "
+                         "it, e.g. to its UTM zone)")
+    data = np.asarray(raster.data)
+    if data.ndim == 3:
+        if not 1 <= band <= data.shape[0]:
+            raise ValueError(f"band {band} does not exist: the raster has {data.shape[0]}")
+        data = data[band - 1]
+    elif data.ndim != 2 or band != 1:
+        raise ValueError(f"band {band} does not exist: the raster has one band")
+    values = data.astype(np.float32)
+    invalid = ~np.isfinite(values)
+    if raster.nodata is not None and np.isfinite(raster.nodata):
+        invalid |= data == raster.nodata
+    values[invalid] = np.nan
+    if invalid.all():
+        raise ValueError("the road raster holds no valid pixel (all no-data or NaN)")
+    low, high = np.nanmin(values), np.nanmax(values)
+    if low < 0 or high > 255:
+        raise ValueError(f"road raster values must lie in 0-1 or 0-255, found {low:g} to "
+                         f"{high:g}")
+    if high > 1:
+        values /= 255.0
+    return GeoRaster(values, raster.transform, raster.crs)
+
+
+def road_mask(probability: np.ndarray, pixel_m: float, *, threshold: float = THRESHOLD,
+              smooth_m: float = SMOOTH_M, max_hole_m2: float = MAX_HOLE_M2,
+              min_area_m2: float = MIN_AREA_M2) -> np.ndarray:
+    """Road pixels of a probability raster, cleaned.
+
+    Parameters
+    ----------
+    probability : ndarray, shape (rows, cols)
+        0-1, NaN = no data (never road).
+    pixel_m : float
+        Pixel size, metres.
+    threshold : float
+        Road where the smoothed probability is at least this.
+    smooth_m : float
+        Gaussian sigma, metres (0: none). No-data pixels do not pull the road down: the
+        smoothing is normalised by the smoothed validity.
+    max_hole_m2, min_area_m2 : float
+        Holes up to this area are filled; components under it dropped, square metres.
+
+    Returns
+    -------
+    ndarray of bool
+    """
+    valid = np.isfinite(probability)
+    values = np.where(valid, probability, 0).astype(np.float32)
+    if smooth_m > 0:
+        sigma = smooth_m / pixel_m
+        weight = ndimage.gaussian_filter(valid.astype(np.float32), sigma)
+        values = ndimage.gaussian_filter(values, sigma) / np.maximum(weight, 1e-6)
+    road = (values >= threshold) & valid
+    pixel_m2 = pixel_m ** 2
+    background, count = ndimage.label(~road)
+    touching_border = np.unique(np.concatenate([background[0], background[-1],
+                                                background[:, 0], background[:, -1]]))
+    small = np.bincount(background.ravel(), minlength=count + 1) * pixel_m2 <= max_hole_m2
+    small[touching_border] = False
+    small[0] = False
+    road |= small[background]
+    labels, count = ndimage.label(road, structure=np.ones((3, 3)))
+    large = np.bincount(labels.ravel(), minlength=count + 1) * pixel_m2 >= min_area_m2
+    large[0] = False
+    return large[labels]
+
+
+def _tiles(shape, tile_px: int, overlap_px: int):
+    """Per tile: the window with context and the core (row and column slices)."""
+    rows, cols = shape
+    for r0 in range(0, rows, tile_px):
+        for c0 in range(0, cols, tile_px):
+            core = (slice(r0, min(rows, r0 + tile_px)), slice(c0, min(cols, c0 + tile_px)))
+            window = (slice(max(0, r0 - overlap_px), min(rows, r0 + tile_px + overlap_px)),
+                      slice(max(0, c0 - overlap_px), min(cols, c0 + tile_px + overlap_px)))
+            yield window, core
+
+
+def _box(transform, rows: slice, cols: slice):
+    x0, y0 = transform * (cols.start, rows.start)
+    x1, y1 = transform * (cols.stop, rows.stop)
+    return shapely.box(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
+
+
+def _sample(raster: GeoRaster, lines, step_m: float):
+    """Per line, the mean of the raster at points every ``step_m`` along it (NaN counts 0)."""
+    points, owner = shapely.get_coordinates(shapely.segmentize(lines, step_m),
+                                            return_index=True)
+    rows, cols = raster.xy_to_rowcol(points[:, 0], points[:, 1])
+    inside = (rows >= 0) & (rows < raster.shape[0]) & (cols >= 0) & (cols < raster.shape[1])
+    values = np.zeros(len(points))
+    values[inside] = np.nan_to_num(raster.data[rows[inside], cols[inside]])
+    return (np.bincount(owner, weights=values, minlength=len(lines))
+            / np.maximum(np.bincount(owner, minlength=len(lines)), 1))
+
+
+def _stitch_seams(lines, seams, tolerance_m: float):
+    """Ends of tile cores that meet on a seam within ``tolerance_m`` become one point."""
+    if len(lines) == 0 or seams.is_empty:
+        return lines
+    ends = np.concatenate([shapely.get_coordinates(shapely.get_point(lines, 0)),
+                           shapely.get_coordinates(shapely.get_point(lines, -1))])
+    on_seam = np.flatnonzero(shapely.distance(shapely.points(ends), seams) <= 1e-6)
+    if len(on_seam) < 2:
+        return lines
+    pairs = shapely.STRtree(shapely.points(ends[on_seam])).query(
+        shapely.points(ends[on_seam]), predicate="dwithin", distance=tolerance_m)
+    count, group = connected_components(coo_matrix(
+        (np.ones(pairs.shape[1]), (pairs[0], pairs[1])), shape=(len(on_seam),) * 2))
+    centre = np.column_stack([np.bincount(group, weights=ends[on_seam, k]) / np.bincount(group)
+                              for k in (0, 1)])
+    ends[on_seam] = centre[group]
+    n = len(lines)
+    coords, owner = shapely.get_coordinates(lines, return_index=True)
+    first = np.r_[0, np.flatnonzero(np.diff(owner)) + 1]
+    last = np.r_[first[1:] - 1, len(coords) - 1]
+    coords[first], coords[last] = ends[:n], ends[n:]
+    return shapely.linestrings(coords, indices=owner)
+
+
+def _raw_skeleton(probability: GeoRaster, *, tile_px: int, overlap_px: int, mask_options,
+                  progress: Progress):
+    """Skeleton lines with widths of the whole raster, tile by tile, cores stitched."""
+    pixel_m = probability.pixel_size
+    transform = probability.transform
+    pieces, widths, cores = [], [], []
+    tiles = list(_tiles(probability.shape, tile_px, overlap_px))
+    for k, (window, core) in enumerate(tiles):
+        report(progress, k / len(tiles), f"skeleton, tile {k + 1} of {len(tiles)}")
+        mask = road_mask(probability.data[window], pixel_m, **mask_options)
+        if not mask.any():
+            continue
+        local = transform * transform.translation(window[1].start, window[0].start)
+        lines = skeleton_lines(mask, local, probability.crs)
+        core_box = _box(transform, *core)
+        cores.append(core_box)
+        if len(tiles) > 1:
+            lines = lines.assign(geometry=shapely.intersection(lines.geometry.values,
+                                                               core_box))
+            lines = lines.explode(index_parts=False)
+            lines = lines[lines.geom_type == "LineString"]
+        pieces.append(lines.geometry.values)
+        widths.append(lines["width_m"].to_numpy(float))
+    if not pieces:
+        return np.empty(0, dtype=object), np.empty(0)
+    lines, width = np.concatenate(pieces), np.concatenate(widths)
+    if len(tiles) > 1:
+        extent = _box(transform, slice(0, probability.shape[0]), slice(0, probability.shape[1]))
+        seams = shapely.difference(shapely.union_all(shapely.boundary(np.array(cores))),
+                                   extent.exterior.buffer(1e-6))
+        lines = _stitch_seams(lines, seams, _SEAM_SNAP_PX * pixel_m)
+    return lines, width
+
+
+def _straighten(lines, reach_m):
+    """Ends of skeleton lines made straight over ``reach_m`` (one value per line).
+
+    At a junction (three or more ends meeting) the skeleton bends towards the crossing's
+    centre: the line's last ``reach_m`` (the most of its lines there) becomes a straight
+    segment to the junction. At a dead end it forks towards the corners of the road's end:
+    the last ``reach_m`` is replaced by the continuation of the stretch before it, so the
+    line ends where the road does.
+    """
+    ends = np.stack([shapely.get_coordinates(shapely.get_point(lines, 0)),
+                     shapely.get_coordinates(shapely.get_point(lines, -1))], axis=1)
+    keys = np.round(ends.reshape(-1, 2) / 1e-6).astype(np.int64)
+    _, node, degree = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    node = node.ravel()
+    reach = np.zeros(len(degree))
+    np.maximum.at(reach, node, np.repeat(reach_m, 2))
+    end_degree = degree[node].reshape(2, -1).T
+    length = shapely.length(lines)
+    # never more than a third of a line from either end, and loops are left alone
+    cut = np.minimum(np.where(end_degree >= 3, reach[node].reshape(2, -1).T,
+                              np.where(end_degree == 1, np.asarray(reach_m)[:, None], 0.0)),
+                     length[:, None] / 3)
+    out = np.array(lines, dtype=object)
+    for k in np.flatnonzero(cut.any(axis=1)):
+        xy = shapely.get_coordinates(lines[k])
+        along = np.r_[0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]
+        inner = xy[(along > cut[k, 0]) & (along < length[k] - cut[k, 1])]
+        if len(inner) == 0:
+            continue
+        first, last = xy[:1], xy[-1:]
+        if end_degree[k, 0] == 1:
+            first = inner[:1] + _heading(inner[::-1], cut[k, 0]) * cut[k, 0]
+        if end_degree[k, 1] == 1:
+            last = inner[-1:] + _heading(inner, cut[k, 1]) * cut[k, 1]
+        out[k] = shapely.linestrings(np.vstack([first, inner, last]))
+    return out
+
+
+def _heading(xy: np.ndarray, window_m: float) -> np.ndarray:
+    """Unit direction at the last vertex of ``xy``, over about ``window_m`` before it."""
+    back = np.hypot(*(xy - xy[-1]).T)
+    far = np.flatnonzero(back >= window_m)
+    start = xy[far[-1]] if len(far) else xy[0]
+    d = xy[-1] - start
+    norm = np.hypot(*d)
+    return d / norm if norm > 0 else np.zeros(2)
+
+
+def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
+                   smooth_m: float = SMOOTH_M, max_hole_m2: float = MAX_HOLE_M2,
+                   min_area_m2: float = MIN_AREA_M2, spur_m: float = SPUR_M,
+                   junction_merge_m: float = JUNCTION_MERGE_M,
+                   straighten: float = STRAIGHTEN, simplify_m: float = SIMPLIFY_M,
+                   min_length_m: float = MIN_LENGTH_M, tile_px: int = TILE_PX,
+                   overlap_px: int = OVERLAP_PX, progress: Progress = None
+                   ) -> gpd.GeoDataFrame:
+    """Road parts of a probability raster: clean centre lines split at junctions.
+
+    Parameters
+    ----------
+    probability : GeoRaster
+        2-D, 0-1, NaN = no data (see :func:`road_probability`), projected CRS in metres.
+    threshold, smooth_m, max_hole_m2, min_area_m2 : float
+        See :func:`road_mask`.
+    spur_m : float
+        End branches shorter than the half width of the widest road at their junction plus
+        this are pruned, metres.
+    junction_merge_m : float
+        Junctions joined by a shorter line are contracted into one, metres.
+    straighten : float
+        The stretch of a branch within this many half widths of the widest road at its
+        junction becomes straight.
+    simplify_m : float
+        Douglas-Peucker tolerance, metres.
+    min_length_m : float
+        Isolated lines shorter than this are dropped, metres.
+    tile_px, overlap_px : int
+        Tile side and context on each side, pixels.
+    progress : callable, optional
+
+    Returns
+    -------
+    GeoDataFrame
+        LineStrings with ``part_id``, ``width_m`` (mean of twice the distance to the mask
+        border along the line, metres) and ``quality`` (mean probability along the line).
+    """
+    if tile_px < 64 or overlap_px < 0:
+        raise ValueError("tile_px must be at least 64 and overlap_px at least 0")
+    mask_options = dict(threshold=threshold, smooth_m=smooth_m, max_hole_m2=max_hole_m2,
+                        min_area_m2=min_area_m2)
+    lines, width = _raw_skeleton(probability, tile_px=tile_px, overlap_px=overlap_px,
+                                 mask_options=mask_options,
+                                 progress=scaled(progress, 0.0, 0.8))
+    report(progress, 0.8, "pruning spurs, contracting junctions")
+    crs = probability.crs
+    if len(lines):
+        score = np.zeros(len(lines))
+        lines, width, score = node_roads(lines, width, score, join_gap_m=spur_m,
+                                         min_length_m=0.0)
+        lines, width, score = merge_close_junctions(lines, width, score,
+                                                    junction_merge_m=junction_merge_m)
+        lines, width, score = node_roads(lines, width, score, join_gap_m=spur_m,
+                                         min_length_m=min_length_m)
+        lines = _straighten(lines, straighten * width / 2)
+        lines = shapely.simplify(lines, simplify_m, preserve_topology=False)
+        usable = shapely.length(lines) > 0
+        lines, width = lines[usable], width[usable]
+    quality = _sample(probability, lines, probability.pixel_size) if len(lines) else []
+    report(progress, 1.0, f"{len(lines)} road parts")
+    return gpd.GeoDataFrame(
+        {"part_id": np.arange(len(lines), dtype=np.int64), "width_m": np.asarray(width, float),
+         "quality": np.clip(np.asarray(quality, float), 0, 1)},
+        geometry=gpd.GeoSeries(lines, crs=crs), crs=crs)
+
+
+def _free_ends(parts: gpd.GeoDataFrame) -> np.ndarray:
+    """``(n, 2)`` bool: whether each part's start / end touches no other part."""
+    lines = parts.geometry.values
+    ends = np.concatenate([shapely.get_coordinates(shapely.get_point(lines, 0)),
+                           shapely.get_coordinates(shapely.get_point(lines, -1))])
+    _, node, degree = np.unique(np.round(ends / 1e-6).astype(np.int64), axis=0,
+                                return_inverse=True, return_counts=True)
+    return (degree[node.ravel()] == 1).reshape(2, -1).T
+
+
+def link_gaps(parts: gpd.GeoDataFrame, probability: GeoRaster | None = None, *,
+              gap_options: dict | None = None, weight_options: dict | None = None
+              ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
+    """Bridge gaps between dead ends (see the module docstring).
+
+    Parameters
+    ----------
+    parts : GeoDataFrame
+        From :func:`skeleton_parts`.
+    probability : GeoRaster, optional
+        The road probability; its mean along a gap is the gap's context (``occlusion``).
+    gap_options, weight_options : dict, optional
+        Keyword arguments of :func:`gisroads.network.subgraph.gap_edges` (defaults
+        :data:`GAP_OPTIONS`) and :func:`gisroads.network.subgraph.edge_weights`.
+
+    Returns
+    -------
+    gaps : GeoDataFrame
+        The gap edges between dead ends, with their weights and ``selected``.
+    strings : GeoDataFrame
+        Parts chained through the selected gaps (:func:`gisroads.network.subgraph.road_strings`).
+    """
+    gaps = gap_edges(parts, **{**GAP_OPTIONS, **(gap_options or {})})
+    if len(gaps):
+        free = _free_ends(parts)
+        row = pd.Series(np.arange(len(parts)), index=parts["part_id"].to_numpy())
+        keep = (free[row[gaps["from_part"]].to_numpy(), gaps["from_end"].to_numpy()]
+                & free[row[gaps["to_part"]].to_numpy(), gaps["to_end"].to_numpy()])
+        gaps = gaps[keep].reset_index(drop=True)
+        gaps["gap_id"] = np.arange(len(gaps), dtype=np.int64)
+    if probability is not None:
+        gaps["occlusion"] = (_sample(probability, gaps.geometry.values, probability.pixel_size)
+                             if len(gaps) else np.empty(0))
+        for kind in ("building", "vehicle", "tree", "vegetated_area", "shadow", "asphalt"):
+            gaps[f"n_{kind}"] = 0.0
+    gaps = select_gap_edges(edge_weights(gaps, **(weight_options or {})))
+    return gaps, road_strings(parts, gaps)
+
+
+def drop_blobs(strings: gpd.GeoDataFrame, *, min_elongation: float = MIN_ELONGATION
+               ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
+    """Road strings that touch no other string and are short for their width are blobs
+    (a roof, a car park, a false patch of the raster), not roads.
+
+    Parameters
+    ----------
+    strings : GeoDataFrame
+        From :func:`link_gaps` (``width_m``).
+    min_elongation : float
+        An isolated string shorter than this many times its width is a blob.
+
+    Returns
+    -------
+    kept, blobs : GeoDataFrame
+    """
+    lines = strings.geometry.values
+    if len(lines) == 0:
+        return strings, strings.iloc[:0]
+    a, b = shapely.STRtree(lines).query(lines, predicate="intersects")
+    touching = np.bincount(a[a != b], minlength=len(lines)) > 0
+    blob = ~touching & (shapely.length(lines) < min_elongation * strings["width_m"].to_numpy(float))
+    return strings[~blob], strings[blob]
+
+
+def _rejected(raw_lines, kept_lines, crs) -> gpd.GeoDataFrame:
+    """Stretches of the raw skeleton that no road keeps (spurs, noise), with a reason."""
+    if len(raw_lines) == 0:
+        return gpd.GeoDataFrame({"reason": pd.Series(dtype=object)},
+                                geometry=gpd.GeoSeries([], crs=crs), crs=crs)
+    covered = shapely.buffer(shapely.union_all(kept_lines), 1.0) if len(kept_lines) else None
+    lost = (shapely.difference(raw_lines, covered) if covered is not None
+            else np.asarray(raw_lines, dtype=object))
+    lost = shapely.get_parts(lost)
+    lost = lost[shapely.length(lost) > 1.0]
+    return gpd.GeoDataFrame({"reason": np.full(len(lost), "spur or isolated", dtype=object),
+                             "length_m": shapely.length(lost)},
+                            geometry=gpd.GeoSeries(lost, crs=crs), crs=crs)
+
+
+def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = THRESHOLD,
+                      method: str = METHOD, part_options: dict | None = None,
+                      gap_options: dict | None = None, weight_options: dict | None = None,
+                      network_options: dict | None = None,
+                      progress: Progress = None) -> RoadNetwork:
+    """A road raster (mask or probability) to the road-network contract.
+
+    Parameters
+    ----------
+    raster : GeoRaster
+        See :func:`road_probability`; projected CRS in metres.
+    band : int
+        1-based band.
+    threshold : float
+        Road probability threshold (0-1; a 0-255 raster is scaled to 0-1 first).
+    method : str
+        The ``method`` of every centre line.
+    part_options : dict, optional
+        Keyword arguments of :func:`skeleton_parts`.
+    gap_options, weight_options : dict, optional
+        See :func:`link_gaps`.
+    network_options : dict, optional
+        Keyword arguments of :func:`gisroads.network.junctions.strings_to_network`.
+    progress : callable, optional
+        ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
+
+    Returns
+    -------
+    RoadNetwork
+        ``score`` is the mean road probability along each road; QA layers ``gap_edges``,
+        ``junction_connections`` and ``rejected``. Empty (valid, typed layers) when the
+        raster holds no road.
+    """
+    probability = road_probability(raster, band=band)
+    parts = skeleton_parts(probability, threshold=threshold, **(part_options or {}),
+                           progress=scaled(progress, 0.0, 0.6))
+    report(progress, 0.6, "linking gaps")
+    gaps, strings = link_gaps(parts, probability, gap_options=gap_options,
+                              weight_options=weight_options)
+    strings, blobs = drop_blobs(strings)
+    network, _ = strings_to_network(strings, extent=probability.bounds, crs=probability.crs,
+                                    method=method, progress=scaled(progress, 0.7, 1.0),
+                                    **(network_options or {}))
+    network.qa["gap_edges"] = gaps
+    network.qa["rejected"] = _rejected(parts.geometry.values,
+                                       network.centrelines.geometry.values, probability.crs)
+    return network
