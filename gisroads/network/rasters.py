@@ -44,11 +44,12 @@ import geopandas as gpd
 import numpy as np
 import pandas as pd
 import shapely
+from affine import Affine
 from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from ..geo import GeoRaster, RoadNetwork
+from ..geo import GeoRaster, RoadNetwork, _apply
 from ..progress import Progress, report, scaled
 from ..vectorize.ribbons import node_roads
 from ..vectorize.skeleton import skeleton_lines
@@ -189,8 +190,8 @@ def _tiles(shape, tile_px: int, overlap_px: int):
 
 
 def _box(transform, rows: slice, cols: slice):
-    x0, y0 = transform * (cols.start, rows.start)
-    x1, y1 = transform * (cols.stop, rows.stop)
+    x0, y0 = _apply(transform, cols.start, rows.start)
+    x1, y1 = _apply(transform, cols.stop, rows.stop)
     return shapely.box(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
 
 
@@ -242,7 +243,8 @@ def _raw_skeleton(probability: GeoRaster, *, tile_px: int, overlap_px: int, mask
         mask = road_mask(probability.data[window], pixel_m, **mask_options)
         if not mask.any():
             continue
-        local = transform * transform.translation(window[1].start, window[0].start)
+        x0, y0 = _apply(transform, window[1].start, window[0].start)
+        local = Affine(transform.a, transform.b, x0, transform.d, transform.e, y0)
         lines = skeleton_lines(mask, local, probability.crs)
         core_box = _box(transform, *core)
         cores.append(core_box)
@@ -250,7 +252,7 @@ def _raw_skeleton(probability: GeoRaster, *, tile_px: int, overlap_px: int, mask
             lines = lines.assign(geometry=shapely.intersection(lines.geometry.values,
                                                                core_box))
             lines = lines.explode(index_parts=False)
-            lines = lines[lines.geom_type == "LineString"]
+            lines = lines[(lines.geom_type == "LineString") & ~lines.is_empty]
         pieces.append(lines.geometry.values)
         widths.append(lines["width_m"].to_numpy(float))
     if not pieces:
@@ -280,10 +282,10 @@ def _straighten(lines, reach_m):
     node = node.ravel()
     reach = np.zeros(len(degree))
     np.maximum.at(reach, node, np.repeat(reach_m, 2))
-    end_degree = degree[node].reshape(2, -1).T
+    end_degree = degree[node].reshape(-1, 2)
     length = shapely.length(lines)
     # never more than a third of a line from either end, and loops are left alone
-    cut = np.minimum(np.where(end_degree >= 3, reach[node].reshape(2, -1).T,
+    cut = np.minimum(np.where(end_degree >= 3, reach[node].reshape(-1, 2),
                               np.where(end_degree == 1, np.asarray(reach_m)[:, None], 0.0)),
                      length[:, None] / 3)
     out = np.array(lines, dtype=object)

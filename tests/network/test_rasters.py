@@ -1,0 +1,141 @@
+"""Any road raster to a network: hand-drawn masks with exact answers, then a real mask."""
+import numpy as np
+import pytest
+import shapely
+from affine import Affine
+from pyproj import CRS
+
+from gisroads.evaluate.buffer import buffer_metrics
+from gisroads.evaluate.topology import line_graph, topology_metrics
+from gisroads.geo import GeoRaster
+from gisroads.network.rasters import raster_to_network, road_probability, skeleton_parts
+
+UTM = CRS.from_epsg(32633)
+PIXEL_M = 0.5
+
+
+def _raster(mask, nodata=None, pixel_m=PIXEL_M, crs=UTM):
+    return GeoRaster(np.asarray(mask), Affine(pixel_m, 0, 1000.0, 0, -pixel_m, 2000.0), crs,
+                     nodata)
+
+
+def _xy(raster, row, col):
+    t = raster.transform
+    return t.c + col * t.a, t.f + row * t.e
+
+
+def _crossing(size=400, width_px=16):
+    """A T: a horizontal road across the whole raster, a vertical one from it to the
+    bottom; both ``width_px`` wide."""
+    mask = np.zeros((size, size), np.uint8)
+    half = width_px // 2
+    mask[size // 2 - half:size // 2 + half, :] = 1
+    mask[size // 2:, size // 2 - half:size // 2 + half] = 1
+    return mask
+
+
+def _spurs(network, spur_m):
+    graph = line_graph(network.centrelines.geometry.values)
+    degree = graph.degree[graph.edges]
+    dangling = (degree.min(axis=1) == 1) & (degree.max(axis=1) >= 3)
+    return int((dangling & (graph.lengths < spur_m)).sum())
+
+
+def test_t_junction_is_one_node_at_the_crossing_with_widths_and_no_spurs():
+    mask = _crossing()
+    # bumps on the border (a kerb, a driveway) grow skeleton twigs
+    mask[180:184, 40:44] = 1
+    mask[216:220, 300:305] = 1
+    raster = _raster(mask)
+    network = raster_to_network(raster)
+    assert len(network.junctions) == 1
+    assert network.junctions.degree.iloc[0] == 3
+    x, y = _xy(raster, 200, 200)
+    assert network.junctions.geometry.iloc[0].distance(shapely.Point(x, y)) < 2.0
+    # split at the junction, sharing its vertex
+    assert len(network.centrelines) == 3
+    assert _spurs(network, 5.0) == 0
+    np.testing.assert_allclose(network.centrelines.width_m, 8.0, atol=1.0)
+    truth = [shapely.LineString([_xy(raster, 200, 0), _xy(raster, 200, 400)]),
+             shapely.LineString([_xy(raster, 200, 200), _xy(raster, 400, 200)])]
+    metrics = buffer_metrics(network.centrelines, truth, buffer_m=2.0)
+    assert metrics.completeness > 0.95 and metrics.correctness > 0.95
+
+
+def test_a_cut_road_is_bridged_and_parallel_roads_are_not_joined():
+    mask = np.zeros((300, 600), np.uint8)
+    mask[60:76, :] = 1                  # a road cut by a tree shadow 8 m long
+    mask[60:76, 280:296] = 0
+    mask[220:236, :250] = 1             # another road, parallel, 80 m away, ends mid-raster
+    raster = _raster(mask)
+    network = raster_to_network(raster)
+    gaps = network.qa["gap_edges"]
+    assert gaps.selected.sum() == 1
+    bridged = gaps[gaps.selected].geometry.iloc[0]
+    y_cut = _xy(raster, 68, 0)[1]
+    assert abs(bridged.centroid.y - y_cut) < 1.0
+    lengths = sorted(network.centrelines.length_m)
+    assert lengths[-1] > 0.95 * 300          # one road across the cut
+    assert len(network.junctions) == 0       # nothing links the two roads
+    assert network.centrelines.distance(
+        shapely.Point(_xy(raster, 150, 300))).min() > 30
+
+
+def test_probability_scales_and_no_data():
+    mask = _crossing()
+    as_255 = road_probability(_raster(mask * 255))
+    assert np.nanmax(as_255.data) == 1.0
+    probability = mask.astype(np.float32) * 0.9
+    probability[:, :100] = -9999
+    raster = _raster(probability, nodata=-9999)
+    assert np.isnan(road_probability(raster).data[:, :100]).all()
+    network = raster_to_network(raster)
+    xmin = network.centrelines.total_bounds[0]
+    assert xmin >= _xy(raster, 0, 100)[0] - 1.0
+    np.testing.assert_allclose(network.centrelines.score, 0.9, atol=0.05)
+
+
+def test_tiles_are_stitched_into_the_same_network():
+    mask = _crossing(size=600)
+    mask[100:400, 450:466] = 1          # a road crossing tile seams
+    raster = _raster(mask)
+    whole = raster_to_network(raster)
+    tiled = raster_to_network(raster, part_options={"tile_px": 128, "overlap_px": 64})
+    assert len(tiled.junctions) == len(whole.junctions)
+    assert len(tiled.centrelines) == len(whole.centrelines)
+    np.testing.assert_allclose(tiled.centrelines.length_m.sum(),
+                               whole.centrelines.length_m.sum(), rtol=0.01)
+
+
+def test_a_raster_without_roads_gives_empty_typed_layers():
+    network = raster_to_network(_raster(np.zeros((100, 100), np.uint8)))
+    network.validate()
+    assert len(network.centrelines) == len(network.junctions) == 0
+
+
+@pytest.mark.parametrize("raster, message", [
+    (_raster(np.zeros((50, 50)), crs=CRS.from_epsg(4326)), "projected CRS"),
+    (_raster(np.full((50, 50), np.nan)), "no valid pixel"),
+    (_raster(np.full((50, 50), 300.0)), "0-1 or 0-255"),
+])
+def test_bad_rasters_are_refused(raster, message):
+    with pytest.raises(ValueError, match=message):
+        raster_to_network(raster)
+
+
+def test_missing_band_is_refused():
+    with pytest.raises(ValueError, match="band 3 does not exist"):
+        skeleton_parts(road_probability(_raster(np.zeros((2, 50, 50))), band=3))
+
+
+def test_real_massachusetts_mask_to_its_centre_lines():
+    from gisroads.imagery.datasets import DATA_DIR, load_massachusetts
+    if not DATA_DIR.is_dir():
+        pytest.skip("../shared/data/imagery is not beside the repository")
+    record = load_massachusetts(stems=["10378795_15"])[0]
+    network = raster_to_network(record.truth_mask)
+    metrics = buffer_metrics(network.centrelines, record.truth, buffer_m=record.buffer_m,
+                             valid_area=record.valid_area)
+    assert metrics.quality >= 0.95
+    assert topology_metrics(network.centrelines, record.truth)["junction_recall"] >= 0.9
+    assert _spurs(network, 5.0) == 0
