@@ -1,0 +1,13 @@
+"""Road database update: what an extraction says about an existing road database.
+
+:func:`conflate` matches extracted centre lines to a database's lines and returns the change
+layers (``confirmed``, ``missing``, ``new``, ``moved``, ``proposed_update``);
+:func:`read_database` reads a database from any OGR source with its feature ids;
+:func:`edit_database` and :func:`score_changes` make and score a benchmark with known changes.
+"""
+from .benchmark import EditedDatabase, edit_database, score_changes
+from .conflate import CHANGES, LAYERS, conflate
+from .sources import read_database
+
+__all__ = ["CHANGES", "LAYERS", "EditedDatabase", "conflate", "edit_database",
+           "read_database", "score_changes"]
