@@ -173,6 +173,48 @@ def cmd_demo(args) -> int:
     return 0
 
 
+# --- road database update (issue 11) -------------------------------------------------------
+
+def cmd_update(args) -> int:
+    from .jobs import update_job
+    result = update_job(args.extracted, args.database, args.out, layer=args.layer,
+                        id_field=args.id_field, width_field=args.width_field,
+                        tolerance_m=args.tolerance, search_m=args.search,
+                        coverage=args.coverage, progress=_ProgressBar(not args.json))
+    _print(result, args.json)
+    return 0
+
+
+def add_update_parser(add) -> None:
+    """The ``update`` subcommand (``add`` as in :func:`build_parser`)."""
+    p = add("update", cmd_update, "compare extracted roads with a road database",
+            "Match extracted road centre lines to the lines of a road database and write "
+            "the changes to a GeoPackage in the database's CRS: confirmed (database roads "
+            "seen, with offsets and widths), missing (roads or stretches not seen, and "
+            "whether the data could have seen them), new (extracted roads absent from the "
+            "database, and the database roads they meet), moved (roads off by more than "
+            "the tolerance, with the proposed geometry) and proposed_update (the database "
+            "with the updates applied and a change field). The database's ids and "
+            "attributes are carried through unchanged.")
+    p.add_argument("extracted", type=Path,
+                   help="extracted centre lines (GeoPackage: layer road_centrelines)")
+    p.add_argument("database", help="road database: any OGR source, e.g. roads.gpkg, "
+                                    "roads.shp or 'PG:dbname=gis host=localhost'")
+    p.add_argument("-o", "--out", type=Path, required=True, help="output GeoPackage (.gpkg)")
+    p.add_argument("--layer", help="the database's layer or table (default: its first)")
+    p.add_argument("--id-field", help="the database's feature id field (default: its "
+                                      "OGR feature ids)")
+    p.add_argument("--width-field", help="the database's road width field, metres "
+                                         "(default: widths measured, not compared)")
+    p.add_argument("--tolerance", type=_positive, default=3.0,
+                   help="offset above which a road has moved, metres (default 3)")
+    p.add_argument("--search", type=_positive, default=15.0,
+                   help="largest offset still matched as the same road, metres (default 15)")
+    p.add_argument("--coverage", type=Path,
+                   help="where the data could show a road: polygons, or a raster with "
+                        "non-zero observable cells (data footprint minus occlusion)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="gisroads", epilog=EPILOG,
@@ -327,6 +369,7 @@ def build_parser() -> argparse.ArgumentParser:
             "tile; write their GeoPackages and PNG quick-looks. Sources and licences: "
             "data/demo/README.md.")
     p.add_argument("-o", "--out", type=Path, default=Path("out/demo"), help="output folder")
+    add_update_parser(add)
     return parser
 
 
