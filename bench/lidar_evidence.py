@@ -18,6 +18,7 @@ from pathlib import Path
 
 import geopandas as gpd
 import numpy as np
+import pandas as pd
 import shapely
 from rasterio import features
 from scipy import ndimage
@@ -64,12 +65,23 @@ def truth_area(scene: str) -> list:
                                cap_style="flat"))
 
 
-def aucs(evidence, truth) -> dict:
+#: measures where a higher value means road (the others are negated for their raw AUC)
+HIGHER_IS_ROAD = {"density"}
+
+
+def aucs(evidence, truth) -> tuple[dict, dict]:
+    """AUC of the likelihood and of each cue's membership; AUC of each raw measure (signed so
+    that road is high, NaN as the least road-like)."""
     valid = np.isfinite(evidence.likelihood.data) | truth
-    out = {"likelihood": pixel_auc(evidence.likelihood.data, truth, valid)}
+    members = {"likelihood": pixel_auc(evidence.likelihood.data, truth, valid)}
+    raw = {}
     for name, member in evidence.memberships.items():
-        out[name] = pixel_auc(member.data, truth, valid)
-    return out
+        members[name] = pixel_auc(member.data, truth, valid)
+        value = evidence.measures[name].data.astype(float)
+        value = value if name in HIGHER_IS_ROAD else -value
+        raw[name] = pixel_auc(np.where(np.isfinite(value), value, np.nanmin(value) - 1),
+                              truth, valid)
+    return members, raw
 
 
 def network(likelihood: GeoRaster, *, threshold: float = 0.5, opening_m: float = 1.0,
@@ -131,28 +143,35 @@ def main() -> None:
     for scene, path in (("fusa", LIDAR / "fusa.laz"), (IGN, LIDAR / f"{IGN}_LA93_IGN69.laz"),
                         ("zurich", LIDAR / "zurich.laz"), ("crop_1", LIDAR / "crop_1.laz"),
                         ("Megaplot", LIDAR / "Megaplot.laz")):
+        start = time.perf_counter()
         cloud = read_las(path)
+        read_seconds = time.perf_counter() - start
         start = time.perf_counter()
         evidence = road_evidence(cloud)
         seconds = time.perf_counter() - start
         like = evidence.likelihood.data
         valid = np.isfinite(like)
         record = {"points": len(cloud), "cell_m": evidence.cell_m, "seconds": round(seconds, 2),
+                  "read_seconds": round(read_seconds, 2),
                   "share_above_0.5": float((like[valid] > 0.5).mean()),
                   "used": evidence.used, "missing": evidence.missing}
         lines = None
         if scene in ("fusa", IGN):
             truth = rasterise(truth_area(scene), evidence.likelihood)
-            record["auc"] = aucs(evidence, truth)
+            record["auc"], record["auc_raw_measure"] = aucs(evidence, truth)
             record["truth_recall_at_0.5"] = float((np.nan_to_num(like)[truth] > 0.5).mean())
             lines = network(evidence.likelihood)
-            reference = gpd.read_file(TRUTH / scene / "centrelines.geojson")
-            metrics = buffer_metrics(lines, reference.to_crs(lines.crs) if lines.crs else
-                                     reference, buffer_m=3.0)
-            record["downstream"] = {"completeness": metrics.completeness,
-                                    "correctness": metrics.correctness,
-                                    "extracted_m": metrics.extracted_length_m,
-                                    "lines": len(lines)}
+            roads = gpd.read_file(TRUTH / scene / "centrelines.geojson")
+            service = gpd.read_file(TRUTH / scene / "service.geojson")
+            record["downstream"] = {"lines": len(lines),
+                                    "extracted_m": float(lines.length.sum())}
+            for name, reference in (("roads", roads), ("roads+service", pd.concat(
+                    [roads, service.set_crs(roads.crs, allow_override=True)]))):
+                metrics = buffer_metrics(lines, reference.set_crs(lines.crs,
+                                                                  allow_override=True),
+                                         buffer_m=3.0)
+                record["downstream"][name] = {"completeness": metrics.completeness,
+                                              "correctness": metrics.correctness}
         quicklook(out / f"{scene}.png", evidence, lines, title=f"{scene}: road likelihood")
         results[scene] = record
         print(scene, json.dumps(record, indent=1, default=float), flush=True)

@@ -34,8 +34,10 @@ Cues (every point and cell through :func:`numpy.bincount` and :mod:`scipy.ndimag
     Mean intensity of the ground returns (split-pulse returns brought to the single-return
     scale as in :mod:`gisroads.lidar.intensity`), as a ratio to the bright ground (the 90th
     percentile over the cells: grass, whose 1064 nm reflectance is 0.4-0.6). Asphalt
-    reflects 0.05-0.25 at 1064 nm, concrete 0.3-0.45: full membership up to a ratio of
-    0.4, none from 0.8 (concrete and bare soil stay in between).
+    reflects 0.05-0.15 at 1064 nm when fresh or typical (up to 0.25 worn), concrete
+    0.3-0.45: full membership up to a ratio of 0.3, none from 0.8 (worn asphalt, concrete
+    and bare soil in between). Of the full ends 0.25, 0.3 and 0.4, 0.3 separated the roads
+    of a synthetic scene best (its asphalt over grass is 0.27, concrete 0.67).
 ``returns``
     Share of the cell's returns that come from pulses with several returns (vegetation, edges
     of roofs). A road is open to the sky but may lie under a street tree, so this cue only
@@ -87,6 +89,9 @@ from .intensity import auto_cell_m, image_grid, split_share
 #: ASPRS classes: ground, road surface, bridge deck; and those that are not the road level
 GROUND, ROAD_SURFACE, BRIDGE_DECK = 2, 11, 17
 NOT_ROAD_CLASSES = (3, 6, 9)
+FILL_SIGMA_M = 16.0
+"""Widest Gaussian (sigma, metres) that fills the terrain under buildings; beyond it the
+nearest ground."""
 
 @dataclass(frozen=True)
 class EvidenceRule:
@@ -114,20 +119,45 @@ class EvidenceRule:
     gates : tuple of str
         Cues whose memberships multiply.
     weights : tuple of (str, float)
-        The other cues and their weights in the geometric mean.
+        The other cues and their weights in the geometric mean (a cue not listed weighs 0).
     """
 
     height_m: tuple[float, float] = (0.25, 0.8)
     density: tuple[float, float] = (0.3, 0.05)
     roughness_m: tuple[float, float] = (0.03, 0.15)
     slope: tuple[float, float] = (0.10, 0.25)
-    intensity: tuple[float, float] = (0.4, 0.8)
+    intensity: tuple[float, float] = (0.3, 0.8)
     returns: tuple[float, float] = (0.15, 0.75)
     returns_floor: float = 0.3
     roughness_floor: float = 0.3
     gates: tuple[str, ...] = ("height", "density", "slope", "classification")
     weights: tuple[tuple[str, float], ...] = (
         ("intensity", 2.0), ("roughness", 1.0), ("returns", 0.5))
+
+
+@dataclass(frozen=True)
+class EvidenceReferences:
+    """The cloud-wide references the measures are normalised by (module docstring).
+
+    Measured on the cloud given to :func:`road_evidence`; pass those of a whole file back in
+    when it is processed tile by tile, so that every tile is normalised alike.
+
+    Attributes
+    ----------
+    open_density : float
+        Ground returns per m2 of open ground.
+    noise_floor_m : float
+        Plane residual of the flattest ground, metres.
+    bright_intensity : float or None
+        Ground intensity of the bright ground (after the split-pulse gain).
+    split_share : float
+        Share of a pulse's intensity a return of a split pulse keeps (1: not measured).
+    """
+
+    open_density: float
+    noise_floor_m: float
+    bright_intensity: float | None = None
+    split_share: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -146,6 +176,7 @@ class RoadEvidence:
         Each cue used and how it was measured.
     missing : dict of str to str
         Each cue not used and why.
+    references : EvidenceReferences
     cell_m : float
     """
 
@@ -154,6 +185,7 @@ class RoadEvidence:
     measures: dict
     used: dict
     missing: dict
+    references: EvidenceReferences
     cell_m: float
 
 
@@ -182,22 +214,21 @@ def _cell_min(cell: np.ndarray, values: np.ndarray, size: int) -> np.ndarray:
     return out
 
 
-def _fill_terrain(grid: np.ndarray) -> np.ndarray:
+def _fill_terrain(grid: np.ndarray, max_sigma_cells: float) -> np.ndarray:
     """NaN cells of a terrain grid filled by normalised convolution at growing scales: a
-    Gaussian of sigma 1, 2, 4, ... cells fills the cells where the cells with a value carry
-    a tenth of its weight (a hole under a building takes the mean of the ground around it)."""
+    Gaussian of sigma 1, 2, 4, ... cells (up to ``max_sigma_cells``) fills the cells where
+    the cells with a value carry a tenth of its weight, so a hole under a building takes the
+    mean of the ground around it; what is left takes the nearest value."""
     filled = grid.copy()
     known = np.isfinite(grid)
     sigma = 1.0
-    while not np.isfinite(filled).all() and known.any():
+    while sigma <= max_sigma_cells and known.any() and not np.isfinite(filled).all():
         weight = _smooth(known.astype(float), sigma)
         near = _ratio(_smooth(np.where(known, grid, 0.0), sigma), weight)
         fill = np.isnan(filled) & (weight > 0.1)
         filled[fill] = near[fill]
-        if sigma > max(grid.shape):
-            return _fill_nearest(filled)
         sigma *= 2.0
-    return filled
+    return _fill_nearest(filled)
 
 
 def _fill_nearest(grid: np.ndarray) -> np.ndarray:
@@ -248,12 +279,13 @@ def morphological_terrain(lowest: np.ndarray, cell_m: float, *, max_window_m: fl
         dh = min(dh0_m + slope * (window - previous) * cell_m, dh_max_m)
         ground &= surface - opened <= dh
         surface, previous, window = opened, window, 2 * window + 1
-    return _fill_terrain(np.where(ground, lowest, np.nan))
+    return _fill_terrain(np.where(ground, lowest, np.nan), FILL_SIGMA_M / cell_m)
 
 
 def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None,
                   rule: EvidenceRule = EvidenceRule(), use_classification: bool = True,
-                  ground_tolerance_m: float = 0.25) -> RoadEvidence:
+                  ground_tolerance_m: float = 0.25,
+                  references: EvidenceReferences | None = None) -> RoadEvidence:
     """Road likelihood per cell of the lowest surface of a point cloud.
 
     Cues, their memberships and the rule that combines them: see the module docstring.
@@ -273,6 +305,8 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
         Use the file's classification when it has one (class 2 present).
     ground_tolerance_m : float
         Without a classification, returns within this of the terrain are ground, metres.
+    references : EvidenceReferences, optional
+        Normalise by these rather than by what this cloud measures (tiles of one file).
 
     Returns
     -------
@@ -308,7 +342,8 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
         deck_cell = grid(None, deck).ravel() > 0
         ground = inside & np.isin(classes, (GROUND, ROAD_SURFACE)) & ~deck_cell[cell]
         ground |= deck
-        terrain = _fill_terrain(_cell_min(cell[ground], z[ground], size).reshape(rows, cols))
+        terrain = _fill_terrain(_cell_min(cell[ground], z[ground], size).reshape(rows, cols),
+                                FILL_SIGMA_M / cell_m)
     else:
         lowest = _cell_min(cell[inside], z[inside], size).reshape(rows, cols)
         terrain = morphological_terrain(lowest, cell_m)
@@ -336,7 +371,8 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
 
     # density of the ground returns, relative to the open ground
     density = _smooth(n_ground, sigma_plane) / cell_m ** 2
-    open_density = np.percentile(density[occupied], 75) if occupied.any() else 0.0
+    open_density = (references.open_density if references is not None else
+                    float(np.percentile(density[occupied], 75)))
     measures["density"] = density / max(open_density, 1e-9)
     memberships["density"] = ramp(measures["density"], *rule.density)
     used["density"] = f"ground returns per m2 over {open_density:.2f} (open ground)"
@@ -365,8 +401,10 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
     residual[~enough] = np.nan
     gradient = np.hypot(a, b)
     gradient[~enough] = np.nan
-    floor = max(float(np.nanpercentile(residual, 10)) if np.isfinite(residual).any()
-                else 0.0, 0.01)
+    if references is not None:
+        floor = references.noise_floor_m
+    else:
+        floor = max(float(np.nanpercentile(residual, 10)) if enough.any() else 0.0, 0.01)
     measures["roughness"], measures["slope"] = residual, gradient
     memberships["roughness"] = ramp(residual - floor, *rule.roughness_m,
                                     floor=rule.roughness_floor)
@@ -375,13 +413,15 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
     used["slope"] = "plane gradient"
 
     # intensity of the ground returns
+    share, bright = 1.0, None
     if cloud.intensity is None:
         missing["intensity"] = "the file records no intensity"
     else:
         value = np.asarray(cloud.intensity, np.float64)
         single = np.asarray(cloud.number_of_returns) <= 1
         if (~single).any() and single.any():
-            share = split_share(value, single, ground, cell)
+            share = references.split_share if references is not None else split_share(
+                value, single, ground, cell)
             value = np.where(single, value, value / share)
             note = f", split returns / {share:.2f}"
         else:
@@ -389,7 +429,10 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
         mean_intensity = _ratio(_smooth(grid(value, ground), sigma_local),
                                 _smooth(n_ground, sigma_local))
         has = np.isfinite(mean_intensity) & occupied
-        bright = np.percentile(mean_intensity[has], 90) if has.any() else np.nan
+        if references is not None and references.bright_intensity is not None:
+            bright = references.bright_intensity
+        else:
+            bright = float(np.percentile(mean_intensity[has], 90)) if has.any() else np.nan
         measures["intensity"] = mean_intensity / bright
         memberships["intensity"] = ramp(measures["intensity"], *rule.intensity)
         used["intensity"] = f"ground intensity over the bright ground ({bright:.0f}{note})"
@@ -433,8 +476,9 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
         if name in rule.gates:
             gate[known] *= member[known]
         else:
-            total[known] += weights[name] * np.log(np.maximum(member[known], 1e-6))
-            weight[known] += weights[name]
+            w = weights.get(name, 0.0)
+            total[known] += w * np.log(np.maximum(member[known], 1e-6))
+            weight[known] += w
     graded = np.exp(_ratio(total, weight))
     likelihood = np.where(np.isnan(graded), gate, gate * graded)
     likelihood[likelihood < 1e-5] = 0.0
@@ -447,4 +491,6 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
         likelihood=raster(likelihood),
         memberships={k: raster(np.where(footprint, v, np.nan)) for k, v in memberships.items()},
         measures={k: raster(np.where(footprint, v, np.nan)) for k, v in measures.items()},
-        used=used, missing=missing, cell_m=float(cell_m))
+        used=used, missing=missing, references=EvidenceReferences(
+            open_density=open_density, noise_floor_m=floor, bright_intensity=bright,
+            split_share=share), cell_m=float(cell_m))
