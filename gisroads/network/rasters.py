@@ -87,6 +87,15 @@ OVERLAP_PX = 128
 GAP_OPTIONS = {"max_gap_m": 40.0, "max_direction_diff_rad": np.radians(35.0),
                "max_lateral_offset_m": 5.0}
 
+#: Weight ranges of the gap edges: widths measured on a raster vary more along a road than
+#: a road part's (a part's mean width falls where it ends at a cut or bends), so a width
+#: difference weighs 0 only at 10 m.
+WEIGHT_OPTIONS = {"weight_ranges": {"width_diff_m": (0.0, 10.0)}}
+
+#: Junction search radii of roads of quality 0 and 1, metres: wider than the imagery's
+#: defaults, since a raster's road ends retreat from a cut by half the road's width.
+NETWORK_OPTIONS = {"min_search_radius_m": 15.0, "max_search_radius_m": 45.0}
+
 _SEAM_SNAP_PX = 1.5
 
 
@@ -319,7 +328,7 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
                    min_area_m2: float = MIN_AREA_M2, spur_m: float = SPUR_M,
                    junction_merge_m: float = JUNCTION_MERGE_M,
                    straighten: float = STRAIGHTEN, simplify_m: float = SIMPLIFY_M,
-                   min_length_m: float = MIN_LENGTH_M, tile_px: int = TILE_PX,
+                   tile_px: int = TILE_PX,
                    overlap_px: int = OVERLAP_PX, progress: Progress = None
                    ) -> gpd.GeoDataFrame:
     """Road parts of a probability raster: clean centre lines split at junctions.
@@ -340,8 +349,6 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
         junction becomes straight.
     simplify_m : float
         Douglas-Peucker tolerance, metres.
-    min_length_m : float
-        Isolated lines shorter than this are dropped, metres.
     tile_px, overlap_px : int
         Tile side and context on each side, pixels.
     progress : callable, optional
@@ -368,7 +375,7 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
         lines, width, score = merge_close_junctions(lines, width, score,
                                                     junction_merge_m=junction_merge_m)
         lines, width, score = node_roads(lines, width, score, join_gap_m=spur_m,
-                                         min_length_m=min_length_m)
+                                         min_length_m=0.0)
         lines = _straighten(lines, straighten * width / 2)
         lines = shapely.simplify(lines, simplify_m, preserve_topology=False)
         usable = shapely.length(lines) > 0
@@ -404,7 +411,8 @@ def link_gaps(parts: gpd.GeoDataFrame, probability: GeoRaster | None = None, *,
         The road probability; its mean along a gap is the gap's context (``occlusion``).
     gap_options, weight_options : dict, optional
         Keyword arguments of :func:`gisroads.network.subgraph.gap_edges` (defaults
-        :data:`GAP_OPTIONS`) and :func:`gisroads.network.subgraph.edge_weights`.
+        :data:`GAP_OPTIONS`) and :func:`gisroads.network.subgraph.edge_weights` (default
+        :data:`WEIGHT_OPTIONS`).
 
     Returns
     -------
@@ -426,14 +434,17 @@ def link_gaps(parts: gpd.GeoDataFrame, probability: GeoRaster | None = None, *,
                              if len(gaps) else np.empty(0))
         for kind in ("building", "vehicle", "tree", "vegetated_area", "shadow", "asphalt"):
             gaps[f"n_{kind}"] = 0.0
-    gaps = select_gap_edges(edge_weights(gaps, **(weight_options or {})))
+    gaps = select_gap_edges(edge_weights(gaps, **(weight_options or WEIGHT_OPTIONS)))
     return gaps, road_strings(parts, gaps)
 
 
-def drop_blobs(strings: gpd.GeoDataFrame, *, min_elongation: float = MIN_ELONGATION
+def drop_blobs(strings: gpd.GeoDataFrame, *, min_elongation: float = MIN_ELONGATION,
+               min_length_m: float = MIN_LENGTH_M
                ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
-    """Road strings that touch no other string and are short for their width are blobs
-    (a roof, a car park, a false patch of the raster), not roads.
+    """Road strings that touch no other string and are short for their width, or short,
+    are blobs (a roof, a car park, a false patch of the raster, noise), not roads. Short
+    pieces of road between two cuts are kept when the gap linking chained them into a
+    longer string.
 
     Parameters
     ----------
@@ -441,6 +452,8 @@ def drop_blobs(strings: gpd.GeoDataFrame, *, min_elongation: float = MIN_ELONGAT
         From :func:`link_gaps` (``width_m``).
     min_elongation : float
         An isolated string shorter than this many times its width is a blob.
+    min_length_m : float
+        An isolated string shorter than this is a blob, metres.
 
     Returns
     -------
@@ -451,7 +464,8 @@ def drop_blobs(strings: gpd.GeoDataFrame, *, min_elongation: float = MIN_ELONGAT
         return strings, strings.iloc[:0]
     a, b = shapely.STRtree(lines).query(lines, predicate="intersects")
     touching = np.bincount(a[a != b], minlength=len(lines)) > 0
-    blob = ~touching & (shapely.length(lines) < min_elongation * strings["width_m"].to_numpy(float))
+    shortest = np.maximum(min_length_m, min_elongation * strings["width_m"].to_numpy(float))
+    blob = ~touching & (shapely.length(lines) < shortest)
     return strings[~blob], strings[blob]
 
 
@@ -492,7 +506,8 @@ def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = TH
     gap_options, weight_options : dict, optional
         See :func:`link_gaps`.
     network_options : dict, optional
-        Keyword arguments of :func:`gisroads.network.junctions.strings_to_network`.
+        Keyword arguments of :func:`gisroads.network.junctions.strings_to_network`
+        (updating :data:`NETWORK_OPTIONS`).
     progress : callable, optional
         ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
 
@@ -512,7 +527,7 @@ def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = TH
     strings, blobs = drop_blobs(strings)
     network, _ = strings_to_network(strings, extent=probability.bounds, crs=probability.crs,
                                     method=method, progress=scaled(progress, 0.7, 1.0),
-                                    **(network_options or {}))
+                                    **{**NETWORK_OPTIONS, **(network_options or {})})
     network.qa["gap_edges"] = gaps
     network.qa["rejected"] = _rejected(parts.geometry.values,
                                        network.centrelines.geometry.values, probability.crs)
