@@ -28,6 +28,7 @@ from gisroads.evaluate import buffer_metrics
 from gisroads.geo import GeoRaster
 from gisroads.imagery.datasets import prune_spurs
 from gisroads.io.las import read_las
+from gisroads.io.quicklook import write_quicklook
 from gisroads.lidar.evidence import road_evidence
 from gisroads.vectorize.skeleton import skeleton_lines
 
@@ -95,7 +96,7 @@ def network(likelihood: GeoRaster, *, threshold: float = 0.5, opening_m: float =
     return lines[lines.length >= min_length_m]
 
 
-def quicklook(path: Path, evidence, lines=None, title: str = "") -> None:
+def quicklook(path: Path, evidence, lines=None, reference=None, title: str = "") -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -119,18 +120,13 @@ def quicklook(path: Path, evidence, lines=None, title: str = "") -> None:
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
-    # the likelihood alone, large
-    fig, ax = plt.subplots(figsize=(10, 10), dpi=110)
-    ax.imshow(evidence.likelihood.data, extent=(xmin, xmax, ymin, ymax), cmap="gray",
-              vmin=0, vmax=1, interpolation="nearest")
+    # the likelihood alone, large, under the downstream lines and the truth centre lines
+    layers = [] if reference is None else [
+        (reference, dict(color="deepskyblue", linewidth=2.5, label="truth centre lines"))]
     if lines is not None:
-        lines.plot(ax=ax, color="red", linewidth=0.8)
-    ax.set_title(title, fontsize=9)
-    ax.ticklabel_format(useOffset=False, style="plain")
-    ax.tick_params(labelsize=6)
-    fig.tight_layout()
-    fig.savefig(path.with_name(path.stem + "_likelihood.png"))
-    plt.close(fig)
+        layers.append((lines, dict(color="red", linewidth=1, label="threshold 0.5, skeleton")))
+    write_quicklook(path.with_name(path.stem + "_likelihood.png"), layers,
+                    background=evidence.likelihood, title=title, size_px=1100)
 
 
 def main() -> None:
@@ -155,7 +151,7 @@ def main() -> None:
                   "read_seconds": round(read_seconds, 2),
                   "share_above_0.5": float((like[valid] > 0.5).mean()),
                   "used": evidence.used, "missing": evidence.missing}
-        lines = None
+        lines = roads = None
         if scene in ("fusa", IGN):
             truth = rasterise(truth_area(scene), evidence.likelihood)
             record["auc"], record["auc_raw_measure"] = aucs(evidence, truth)
@@ -172,7 +168,10 @@ def main() -> None:
                                          buffer_m=3.0)
                 record["downstream"][name] = {"completeness": metrics.completeness,
                                               "correctness": metrics.correctness}
-        quicklook(out / f"{scene}.png", evidence, lines, title=f"{scene}: road likelihood")
+        quicklook(out / f"{scene}.png", evidence, lines,
+                  None if roads is None else roads.set_crs(evidence.likelihood.crs,
+                                                           allow_override=True),
+                  title=f"{scene}: road likelihood")
         results[scene] = record
         print(scene, json.dumps(record, indent=1, default=float), flush=True)
     (out / "results.json").write_text(json.dumps(results, indent=1, default=float))

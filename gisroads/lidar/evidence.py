@@ -45,7 +45,7 @@ Cues (every point and cell through :func:`numpy.bincount` and :mod:`scipy.ndimag
 ``classification``
     When the file classifies its points (it has class 2, ground): ground is class 2, the
     road surface class 11 and a bridge deck class 17 (the surface where the file has it);
-    other points are never ground. Membership: one minus the share of the cell's low
+    other points are never ground, and noise (classes 7, 18) is left out. Membership: one minus the share of the cell's low
     returns (within ``height`` of the terrain) that are low vegetation, buildings or water
     (classes 3, 6, 9); when the file has road-surface points (class 11), also times
     ``0.3 + 0.7 * share of class 11`` among them.
@@ -86,9 +86,10 @@ from ..geo import GeoRaster
 from ..io.las import PointCloud
 from .intensity import auto_cell_m, image_grid, split_share
 
-#: ASPRS classes: ground, road surface, bridge deck; and those that are not the road level
+#: ASPRS classes: ground, road surface, bridge deck; those that are not the road level; noise
 GROUND, ROAD_SURFACE, BRIDGE_DECK = 2, 11, 17
 NOT_ROAD_CLASSES = (3, 6, 9)
+NOISE_CLASSES = (7, 18)
 FILL_SIGMA_M = 16.0
 """Widest Gaussian (sigma, metres) that fills the terrain under buildings; beyond it the
 nearest ground."""
@@ -316,16 +317,21 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
     if len(xyz) == 0:
         raise ValueError("the cloud holds no points")
     x, y, z = xyz.T
+    classes = np.asarray(cloud.classification)
+    classified = use_classification and bool((classes == GROUND).any())
     if bounds is None:
         bounds = (x.min(), y.min(), x.max(), y.max())
     if cell_m is None:
         area = max((bounds[2] - bounds[0]) * (bounds[3] - bounds[1]), 1.0)
-        cell_m = auto_cell_m(len(xyz), area)
+        count = ((x >= bounds[0]) & (x <= bounds[2]) & (y >= bounds[1]) & (y <= bounds[3]))
+        cell_m = auto_cell_m(int(count.sum()), area)
     transform, (rows, cols) = image_grid(bounds, cell_m)
     size = rows * cols
     col = np.floor((x - transform.c) / cell_m).astype(np.int64)
     row = np.floor((transform.f - y) / cell_m).astype(np.int64)
     inside = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
+    if classified:
+        inside &= ~np.isin(classes, NOISE_CLASSES)
     cell = np.where(inside, row * cols + col, 0)
 
     def grid(values, mask=inside):
@@ -333,8 +339,6 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
                            minlength=size).reshape(rows, cols).astype(np.float64)
 
     used, missing, measures, memberships = {}, {}, {}, {}
-    classes = np.asarray(cloud.classification)
-    classified = use_classification and bool((classes == GROUND).any())
 
     # Terrain and the returns of the lowest surface.
     if classified:
@@ -430,12 +434,19 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
                                 _smooth(n_ground, sigma_local))
         has = np.isfinite(mean_intensity) & occupied
         if references is not None and references.bright_intensity is not None:
-            bright = references.bright_intensity
+            dark, bright = 0.0, references.bright_intensity
+        elif has.any():
+            dark, bright = (float(v) for v in np.percentile(mean_intensity[has], [10, 90]))
         else:
-            bright = float(np.percentile(mean_intensity[has], 90)) if has.any() else np.nan
-        measures["intensity"] = mean_intensity / bright
-        memberships["intensity"] = ramp(measures["intensity"], *rule.intensity)
-        used["intensity"] = f"ground intensity over the bright ground ({bright:.0f}{note})"
+            dark = bright = 0.0
+        if not bright > 0 or dark >= 0.95 * bright:
+            missing["intensity"] = "the ground intensity has no contrast (10th and 90th " \
+                                   "percentiles within 5 %)"
+            bright = None
+        else:
+            measures["intensity"] = mean_intensity / bright
+            memberships["intensity"] = ramp(measures["intensity"], *rule.intensity)
+            used["intensity"] = f"ground intensity over the bright ground ({bright:.0f}{note})"
 
     # returns: share of returns from multi-return pulses
     multi = np.asarray(cloud.number_of_returns) > 1

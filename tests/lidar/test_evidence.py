@@ -164,3 +164,20 @@ def test_tiles_normalised_by_the_whole_clouds_references_match_the_whole(scene_c
 def test_little_of_a_forest_plot_or_a_field_looks_like_road(lidar_dir, name, measured):
     likelihood = road_evidence(read_las(lidar_dir / name)).likelihood.data
     assert (likelihood[np.isfinite(likelihood)] > 0.5).mean() < measured + 0.05
+
+
+def test_constant_intensity_and_noise_points_are_left_out(scene_cloud):
+    _, cloud, truth = scene_cloud
+    flat = dataclasses.replace(cloud, intensity=np.full(len(cloud), 700, np.uint16))
+    evidence = road_evidence(flat)
+    assert evidence.missing == {"intensity": "the ground intensity has no contrast (10th and "
+                                             "90th percentiles within 5 %)"}
+    assert evidence.references.bright_intensity is None
+    # low noise 30 m under the ground, classified 7: ignored, nothing changes
+    rng = np.random.default_rng(1)
+    pick = rng.choice(len(cloud), 2000, replace=False)
+    noisy = concatenate([cloud, PointCloud(
+        cloud.xyz[pick] - [0.0, 0.0, 30.0], cloud.intensity[pick], np.full(2000, 7, np.uint8),
+        cloud.return_number[pick], cloud.number_of_returns[pick], cloud.crs)])
+    np.testing.assert_array_equal(road_evidence(noisy).likelihood.data,
+                                  road_evidence(cloud).likelihood.data)
