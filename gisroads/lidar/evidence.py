@@ -45,10 +45,10 @@ Cues (every point and cell through :func:`numpy.bincount` and :mod:`scipy.ndimag
 ``classification``
     When the file classifies its points (it has class 2, ground): ground is class 2, the
     road surface class 11 and a bridge deck class 17 (the surface where the file has it);
-    other points are never ground, and noise (classes 7, 18) is left out. Membership: one minus the share of the cell's low
-    returns (within ``height`` of the terrain) that are low vegetation, buildings or water
-    (classes 3, 6, 9); when the file has road-surface points (class 11), also times
-    ``0.3 + 0.7 * share of class 11`` among them.
+    other points are never ground, and noise (classes 7, 18) is left out. Membership: one
+    minus the share of the cell's low returns (within ``height`` of the terrain) that are
+    low vegetation, buildings or water (classes 3, 6, 9); when the file has road-surface
+    points (class 11), also times ``0.3 + 0.7 * share of class 11`` among them.
 
 Without a classification the terrain is the progressive morphological filter of the
 lowest returns (Zhang et al. 2003: openings of growing windows, each cell kept while it
@@ -74,6 +74,13 @@ half a cell), the plane window about 12 (sigma 0.75-2.5 m; a plane needs 5 retur
 The terrain under buildings is the mean of the ground around them (normalised convolution
 at growing scales). Cells with no return within ``max(1.5 m, 2.5 cells)`` are outside the
 data: NaN.
+
+**Measured** (``bench/lidar_evidence.py``; pixel ROC AUC against the truth road area, NaN
+counted as 0): fusa.laz 0.870 (intensity alone 0.830, height 0.726, roughness 0.657,
+slope 0.643, density 0.628, returns 0.582, classification 0.572), in about 0.5 s for its
+277,573 points; the thinned IGN tile (1.9 m cells, truth partial) 0.806, 79 % of its truth
+road cells above 0.5; above 0.5 on 8 % of the Megaplot forest plot, 5 % of crop_1's field
+and 26 % of the zurich campus (its paved access ways); a synthetic scene 0.950.
 """
 from __future__ import annotations
 
