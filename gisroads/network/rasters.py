@@ -75,6 +75,8 @@ JUNCTION_MERGE_M = 4.0
 STRAIGHTEN = 1.5
 #: Douglas-Peucker tolerance of the centre lines, metres.
 SIMPLIFY_M = 0.5
+#: Parts wider than this are no road (the widest roads of Zhu & Mordohai's hypotheses).
+MAX_WIDTH_M = 25.0
 #: Isolated lines shorter than this are dropped, metres.
 MIN_LENGTH_M = 10.0
 #: An isolated string shorter than this many times its width is a blob, not a road.
@@ -328,7 +330,7 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
                    min_area_m2: float = MIN_AREA_M2, spur_m: float = SPUR_M,
                    junction_merge_m: float = JUNCTION_MERGE_M,
                    straighten: float = STRAIGHTEN, simplify_m: float = SIMPLIFY_M,
-                   tile_px: int = TILE_PX,
+                   max_width_m: float = MAX_WIDTH_M, tile_px: int = TILE_PX,
                    overlap_px: int = OVERLAP_PX, progress: Progress = None
                    ) -> gpd.GeoDataFrame:
     """Road parts of a probability raster: clean centre lines split at junctions.
@@ -349,6 +351,9 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
         junction becomes straight.
     simplify_m : float
         Douglas-Peucker tolerance, metres.
+    max_width_m : float
+        Parts wider than this (mean width, metres) are no road: the middle of a field, a
+        lawn or a square.
     tile_px, overlap_px : int
         Tile side and context on each side, pixels.
     progress : callable, optional
@@ -378,7 +383,7 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
                                          min_length_m=0.0)
         lines = _straighten(lines, straighten * width / 2)
         lines = shapely.simplify(lines, simplify_m, preserve_topology=False)
-        usable = shapely.length(lines) > 0
+        usable = (shapely.length(lines) > 0) & (width <= max_width_m)
         lines, width = lines[usable], width[usable]
     quality = _sample(probability, lines, probability.pixel_size) if len(lines) else []
     report(progress, 1.0, f"{len(lines)} road parts")
@@ -484,6 +489,26 @@ def _rejected(raw_lines, kept_lines, crs) -> gpd.GeoDataFrame:
                             geometry=gpd.GeoSeries(lost, crs=crs), crs=crs)
 
 
+def _clip_to_extent(network: RoadNetwork, extent) -> None:
+    """Keep the network inside the raster: a dead end extended to where its road ends, or
+    a junction built through the extensions of two ends, can reach past the border."""
+    lines = network.centrelines
+    if len(lines) == 0 or shapely.covers(extent, shapely.union_all(lines.geometry.values)):
+        return
+    clipped = shapely.intersection(lines.geometry.values, extent)
+    lines = lines.assign(geometry=clipped).explode(index_parts=False)
+    lines = lines[(lines.geom_type == "LineString") & ~lines.is_empty].reset_index(drop=True)
+    lines["length_m"] = shapely.length(lines.geometry.values)
+    network.centrelines = lines
+    polygons = network.polygons.assign(geometry=shapely.intersection(
+        network.polygons.geometry.values, extent)).explode(index_parts=False)
+    polygons = polygons[polygons.geom_type == "Polygon"].reset_index(drop=True)
+    polygons["area_m2"] = shapely.area(polygons.geometry.values)
+    network.polygons = polygons
+    network.junctions = network.junctions[shapely.covers(
+        extent, network.junctions.geometry.values)].reset_index(drop=True)
+
+
 def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = THRESHOLD,
                       method: str = METHOD, part_options: dict | None = None,
                       gap_options: dict | None = None, weight_options: dict | None = None,
@@ -528,6 +553,7 @@ def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = TH
     network, _ = strings_to_network(strings, extent=probability.bounds, crs=probability.crs,
                                     method=method, progress=scaled(progress, 0.7, 1.0),
                                     **{**NETWORK_OPTIONS, **(network_options or {})})
+    _clip_to_extent(network, shapely.box(*probability.bounds))
     network.qa["gap_edges"] = gaps
     network.qa["rejected"] = _rejected(parts.geometry.values,
                                        network.centrelines.geometry.values, probability.crs)
