@@ -1,10 +1,18 @@
-"""Zhu & Mordohai's LiDAR road extraction (Algorithm 1) as a composition of the stages.
+"""LiDAR road extraction as a composition of the stages, with two road cues.
 
-Per tile: multi-level ground planes -> one 0.5 m intensity image per ground level -> local-
-energy edges and an NCut over-segmentation -> rectangle hypotheses and per-width likelihood
-maps -> greedy minimum cover -> rectangles to centre lines. Tiles are stitched at their seams
-into one road network; road polygons carry their ground level so that the points of the
-cloud can be classified back in 3D (:mod:`gisroads.lidar.tagging`).
+``cue="intensity"``, Zhu & Mordohai's Algorithm 1 (:func:`extract_tile`): per tile,
+multi-level ground planes -> one 0.5 m intensity image per ground level -> local-energy
+edges and an NCut over-segmentation -> rectangle hypotheses and per-width likelihood maps ->
+greedy minimum cover -> rectangles to centre lines. Tiles are stitched at their seams into
+one road network; road polygons carry their ground level so that the points of the cloud
+can be classified back in 3D (:mod:`gisroads.lidar.tagging`).
+
+``cue="evidence"``, beyond the paper (:func:`evidence_raster`): per tile, the road
+likelihood of everything the cloud carries (:mod:`gisroads.lidar.evidence`: intensity,
+height above the terrain, density, roughness, slope, returns, the file's classification),
+every tile normalised by the references of the first, mosaicked from the tiles' cores; then
+the project's one network stage (:func:`gisroads.network.rasters.raster_to_network`): gaps
+bridged by the integer program, junctions built, curved roads followed.
 """
 from __future__ import annotations
 
@@ -20,7 +28,9 @@ from ..geo import GeoRaster, RoadNetwork
 from ..io.las import LasError, PointCloud, cloud_crs, las_info, read_las
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
+from ..network.rasters import raster_to_network
 from ..vectorize.ribbons import rectangles_to_network, ribbons_to_network
+from .evidence import road_evidence
 from .ground import GroundPlanes, ground_planes
 from .hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, likelihood_maps,
                          road_hypotheses)
@@ -30,6 +40,11 @@ from .tagging import level_heights
 from .tiles import Tile, stitch_tiles, tile_grid
 
 METHOD = "zhu-mordohai"
+EVIDENCE_METHOD = "lidar-evidence"
+CUES = ("intensity", "evidence")
+#: Likelihood at which an evidence cell is road: the combined cues must all agree, since
+#: paved non-road surfaces (car parks, footpaths) score as road on every per-cell cue.
+EVIDENCE_THRESHOLD = 0.8
 @dataclass
 class TileRoads:
     """What one tile gives: its roads and the intermediate products, for QA."""
@@ -50,6 +65,10 @@ class LidarRoads:
     network: RoadNetwork
     heights: GeoRaster | None
     tiles: list[TileRoads] = field(default_factory=list)
+    evidence: GeoRaster | None = None
+    """The road likelihood (``cue="evidence"``), in the working metre CRS."""
+    cues: dict = field(default_factory=dict)
+    """Cue name -> how it was measured (``cue="evidence"``: those the file allowed)."""
 
 
 def ground_and_intensity(cloud: PointCloud, planes: GroundPlanes, *, bounds, cell_m: float
@@ -162,33 +181,115 @@ def _with_level(frame: gpd.GeoDataFrame, anchors, levelled: gpd.GeoDataFrame
     return frame
 
 
-def extract_roads(path, *, tile_m: float = 300.0, overlap_m: float = 100.0,
-                  cell_m: float | None = None, widths_m=DEFAULT_WIDTHS_M, lengths_m=DEFAULT_LENGTHS_M,
+def evidence_raster(path, *, tile_m: float = 300.0, overlap_m: float = 100.0,
+                    cell_m: float | None = None, min_points: int = 1000,
+                    progress: Progress = None) -> tuple[GeoRaster | None, dict, dict]:
+    """The road likelihood of a LAS/LAZ file (:func:`gisroads.lidar.evidence.road_evidence`),
+    tile by tile, mosaicked from the tiles' cores.
+
+    Every tile is normalised by the references (open-ground density, noise floor, bright
+    intensity) of the first tile holding ``min_points``, so the tiles of one file agree.
+
+    Returns
+    -------
+    likelihood : GeoRaster or None
+        2-D, float32 in [0, 1], NaN outside the data, in the working metre CRS; None when no
+        tile holds ``min_points``.
+    used, missing : dict
+        Cue -> how it was measured, and cue -> why it was left out (first tile).
+    """
+    info = las_info(path)
+    xmin, ymin, xmax, ymax = info["extent_m"]
+    if cell_m is None:
+        cell_m = auto_cell_m(info["point_count"], (xmax - xmin) * (ymax - ymin))
+    tiles = tile_grid(info["extent_m"], tile_m=tile_m, overlap_m=overlap_m)
+    pieces, references, used, missing = [], None, {}, {}
+    for i, tile in enumerate(tiles):
+        report(progress, i / len(tiles), f"tile {i + 1} of {len(tiles)}: road evidence")
+        try:
+            cloud = read_las(path, bbox=tile.bounds)
+        except LasError:
+            continue  # an empty tile
+        if len(cloud) < min_points:
+            continue
+        evidence = road_evidence(cloud, cell_m=cell_m, bounds=tile.bounds,
+                                 references=references)
+        if references is None:
+            references, used, missing = evidence.references, evidence.used, evidence.missing
+        raster = evidence.likelihood
+        pieces.append((tile, GeoRaster(raster.data[None], raster.transform, raster.crs)))
+    report(progress, 1.0, "road evidence done")
+    if not pieces:
+        return None, used, missing
+    mosaic = mosaic_cores(pieces, cell_m)
+    return GeoRaster(mosaic.data[0], mosaic.transform, mosaic.crs), used, missing
+
+
+def _evidence_roads(path, *, threshold: float, network_options: dict | None,
+                    progress: Progress, **raster_options) -> LidarRoads:
+    working, source = cloud_crs(path)
+    likelihood, used, _ = evidence_raster(path, progress=scaled(progress, 0.0, 0.6),
+                                          **raster_options)
+    if likelihood is None:
+        network = ribbons_to_network(_no_lines(working), method=EVIDENCE_METHOD)
+    else:
+        network = raster_to_network(likelihood, threshold=threshold, method=EVIDENCE_METHOD,
+                                    progress=scaled(progress, 0.6, 1.0),
+                                    **(network_options or {}))
+    network.centrelines["cues"] = ",".join(used)
+    network.polygons["level"] = np.zeros(len(network.polygons), np.int64)
+    if source is not None and working is not None and source != working:
+        network = RoadNetwork(*(frame.to_crs(source) for frame in (
+            network.centrelines, network.polygons, network.junctions)),
+            {name: frame.to_crs(source) for name, frame in network.qa.items()})
+    return LidarRoads(network, None, evidence=likelihood, cues=used)
+
+
+def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
+                  overlap_m: float = 100.0, cell_m: float | None = None,
+                  widths_m=DEFAULT_WIDTHS_M, lengths_m=DEFAULT_LENGTHS_M,
                   n_segments: int = 150, t_planar: float = 0.01, t_vert: float = 0.98,
+                  threshold: float = EVIDENCE_THRESHOLD, network_options: dict | None = None,
                   min_points: int = 1000, progress: Progress = None) -> LidarRoads:
-    """The road network of a LAS/LAZ file, tile by tile (Zhu & Mordohai, Algorithm 1).
+    """The road network of a LAS/LAZ file, tile by tile.
 
     Parameters
     ----------
     path : str or Path
+    cue : {"intensity", "evidence"}
+        ``intensity``: Zhu & Mordohai's Algorithm 1; ``evidence``: the road likelihood of
+        every cue the cloud carries through the network stage (module docstring).
     tile_m, overlap_m : float
         Tile side and overlap with each neighbour, metres (paper: 300 m and 100 m).
     cell_m : float, optional
-        Intensity image cell, metres; by default :func:`auto_cell_m` of the file.
+        Image cell, metres; by default :func:`auto_cell_m` of the file.
+    threshold : float
+        ``cue="evidence"``: likelihood at which a cell is road.
+    network_options : dict, optional
+        ``cue="evidence"``: keyword arguments of
+        :func:`gisroads.network.rasters.raster_to_network`.
     min_points : int
         Tiles with fewer points are skipped.
-    Other parameters: see :func:`extract_tile`.
+    Other parameters (``cue="intensity"``): see :func:`extract_tile`.
 
     Returns
     -------
     LidarRoads
-        The network in the file's CRS; QA layers ``rectangles`` and ``hypotheses``.
+        The network in the file's CRS; QA layers ``rectangles`` and ``hypotheses``
+        (intensity), ``gap_edges``, ``junction_connections`` and ``rejected`` (evidence).
 
     Raises
     ------
     LasError
-        Unreadable file; ValueError when the cloud has no intensity.
+        Unreadable file; ValueError when the intensity cue meets a cloud without intensity,
+        or for an unknown cue.
     """
+    if cue not in CUES:
+        raise ValueError(f"cue must be one of {CUES}, not {cue!r}")
+    if cue == "evidence":
+        return _evidence_roads(path, threshold=threshold, network_options=network_options,
+                               progress=progress, tile_m=tile_m, overlap_m=overlap_m,
+                               cell_m=cell_m, min_points=min_points)
     info = las_info(path)
     xmin, ymin, xmax, ymax = info["extent_m"]
     if cell_m is None:
