@@ -1,3 +1,4 @@
+import re
 import sqlite3
 
 import geopandas as gpd
@@ -6,6 +7,7 @@ import shapely
 
 from gisroads.geo import network_from_centrelines
 from gisroads.io.vector import list_layers, read_layer, write_geopackage
+from tests.road_layers import geometry_types
 
 
 def small_network():
@@ -26,7 +28,10 @@ def test_multi_layer_geopackage_with_styles(tmp_path):
     con = sqlite3.connect(path)
     rows = con.execute("SELECT f_table_name, f_geometry_column, useAsDefault, styleQML "
                        "FROM layer_styles").fetchall()
+    times = [t for (t,) in con.execute("SELECT update_time FROM layer_styles")]
     con.close()
+    # GeoPackage datetimes are ISO 8601 with a Z (GDAL warns about SQLite's default format)
+    assert all(re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z", t) for t in times)
     assert {r[0] for r in rows} == {"road_centrelines", "road_polygons", "junctions"}
     assert all(r[1] == "geom" and r[2] == 1 and r[3].lstrip().startswith("<!DOCTYPE qgis")
                for r in rows)
@@ -52,15 +57,6 @@ def test_read_layer_reprojects_and_refuses_bad_paths(tmp_path):
         read_layer(tmp_path / "none.gpkg")
     with pytest.raises(ValueError, match=".gpkg"):
         write_geopackage(tmp_path / "n.shp", small_network().layers())
-
-
-def geometry_types(path) -> dict[str, str]:
-    con = sqlite3.connect(path)
-    try:
-        return dict(con.execute("SELECT table_name, geometry_type_name"
-                                " FROM gpkg_geometry_columns").fetchall())
-    finally:
-        con.close()
 
 
 def test_empty_layers_keep_their_geometry_type(tmp_path):
