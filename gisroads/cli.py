@@ -1,7 +1,9 @@
 """The ``gisroads`` command: one subcommand per job, progress on stderr, ``--json`` for scripts.
 
 Errors in the input (unreadable or empty files, missing georeferencing, bad values) print one
-line, ``gisroads: error: ...``, and exit with status 2; nothing is written.
+line, ``gisroads: error: ...``, and exit with status 2; nothing is written. Warnings (no road
+found: the outputs hold empty layers) print ``gisroads: warning: ...`` after the command's
+output, which still exits 0.
 """
 from __future__ import annotations
 
@@ -376,11 +378,17 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from .errors import reported_warnings
     from .io.las import LasError
     from .io.raster import RasterError
     from .progress import Cancelled
+    notes = []
     try:
-        return args.func(args)
+        with reported_warnings(notes.append):
+            status = args.func(args)
+        for note in notes:  # after the progress bar and the result
+            print(f"gisroads: warning: {note}", file=sys.stderr)
+        return status
     except (LasError, RasterError, ValueError, FileNotFoundError) as err:
         print(f"gisroads: error: {err}", file=sys.stderr)
         return 2

@@ -4,15 +4,17 @@ Each job reads files, calls pure stages, and writes its outputs through temporar
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import geopandas as gpd
 import numpy as np
 import shapely
 
+from .errors import NoRoadFoundWarning
 from .evaluate import evaluate_network, match_layers
-from .geo import CENTRELINES, POLYGONS, GeoRaster
-from .io.las import las_info
+from .geo import CENTRELINES, POLYGONS, GeoRaster, RoadNetwork
+from .io.las import cloud_crs, las_info
 from .io.quicklook import write_quicklook
 from .io.raster import raster_info, read_raster, write_geotiff
 from .io.vector import list_layers, read_layer, write_geopackage
@@ -52,6 +54,22 @@ def describe_file(path) -> dict:
                            else None})
         return {"kind": "vector", "path": str(path), "layers": layers}
     return {"kind": "raster", **raster_info(path)}
+
+
+def _warn_if_empty(frame: gpd.GeoDataFrame, source, found: str = "road", *,
+                   stacklevel: int = 3) -> None:
+    """Warn that a job found no ``found`` in ``source`` (a file, or a layer given as a
+    GeoDataFrame) when ``frame`` is empty, and wrote empty layers: a valid answer, for a
+    forest plot or a field."""
+    if len(frame) == 0:
+        where = "the input layer" if isinstance(source, gpd.GeoDataFrame) else source
+        warnings.warn(f"no {found} found in {where}; wrote empty layers",
+                      NoRoadFoundWarning, stacklevel=stacklevel)
+
+
+def _warn_if_no_road(network: RoadNetwork, source) -> None:
+    """Warn that a job found no road in ``source`` and wrote empty layers."""
+    _warn_if_empty(network.centrelines, source, stacklevel=4)
 
 
 def synth_job(out_dir, *, size_m=(400.0, 400.0), seed: int = 0, density_per_m2: float = 10.0,
@@ -147,7 +165,8 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
     rectangles and hypotheses) in the cloud's CRS; optionally ``tagged_las`` (the cloud with
     road points in class 11), ``rasters_dir`` (per-level intensity and likelihood GeoTIFFs
     of every tile, and the per-level ground heights) and a ``quicklook`` PNG.
-    ``options`` go to :func:`gisroads.lidar.pipeline.extract_roads`.
+    ``options`` go to :func:`gisroads.lidar.pipeline.extract_roads`. A cloud without roads
+    gives empty layers and a :class:`~gisroads.errors.NoRoadFoundWarning`.
 
     Returns
     -------
@@ -159,17 +178,19 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
 
     roads = extract_roads(cloud_path, progress=scaled(progress, 0.0, 0.85), **options)
     network = roads.network
-    if len(network.centrelines) == 0:
-        raise ValueError(f"{cloud_path}: no road found")
     write_geopackage(out_path, network.layers())
+    _warn_if_no_road(network, cloud_path)
+    working, _ = cloud_crs(cloud_path)
     result = {"gpkg": Path(out_path), "roads": len(network.centrelines),
               "length_m": float(network.centrelines.length_m.sum()),
               "junctions": len(network.junctions), "tiles": len(roads.tiles)}
+    # tiles with a ground level to image (a tile of a few metres may have none)
+    imaged = [t for t in roads.tiles if len(t.intensity.data)]
     if rasters_dir is not None:
         report(progress, 0.86, "writing rasters")
         rasters = Path(rasters_dir)
         rasters.mkdir(parents=True, exist_ok=True)
-        for tile in roads.tiles:
+        for tile in imaged:
             name = f"tile_r{tile.tile.row}_c{tile.tile.col}"
             levels = [f"level_{k}" for k in range(tile.intensity.data.shape[0])]
             write_geotiff(rasters / f"{name}_intensity.tif", tile.intensity, band_names=levels)
@@ -177,21 +198,23 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
                 write_geotiff(rasters / f"{name}_likelihood_level_{k}.tif", maps,
                               band_names=[f"width_{w:g}_m" for w in options.get(
                                   "widths_m", DEFAULT_WIDTHS_M)])
-        write_geotiff(rasters / "ground_heights.tif", roads.heights,
-                      band_names=[f"level_{k}" for k in range(roads.heights.data.shape[0])])
+        if imaged:
+            write_geotiff(rasters / "ground_heights.tif", roads.heights, band_names=[
+                f"level_{k}" for k in range(roads.heights.data.shape[0])])
         result["rasters"] = rasters
     if tagged_las is not None:
         report(progress, 0.9, "tagging road points")
-        working = roads.tiles[0].centrelines.crs
         result["tagged_points"] = tag_road_points(cloud_path, tagged_las,
                                                   network.polygons.to_crs(working),
                                                   roads.heights)
         result["tagged_las"] = Path(tagged_las)
     if quicklook is not None:
         report(progress, 0.97, "drawing the quick-look")
-        intensity = mosaic_cores([(t.tile, t.intensity) for t in roads.tiles],
-                                 roads.tiles[0].intensity.pixel_size)
-        working = intensity.crs
+        background = None
+        if imaged:
+            intensity = mosaic_cores([(t.tile, t.intensity) for t in imaged],
+                                     imaged[0].intensity.pixel_size)
+            background = GeoRaster(intensity.data[0], intensity.transform, working)
         write_quicklook(quicklook, [
             (network.qa["rectangles"].to_crs(working),
              dict(facecolor="none", edgecolor="cyan", linewidth=0.6)),
@@ -199,7 +222,7 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
              dict(color="red", linewidth=1.5, label="road centre lines")),
             (network.junctions.to_crs(working),
              dict(color="yellow", markersize=20, label="junctions")),
-        ], background=GeoRaster(intensity.data[0], intensity.transform, working),
+        ], background=background,
             title=f"{Path(cloud_path).name}: roads over the ground intensity (level 0)")
         result["quicklook"] = Path(quicklook)
     report(progress, 1.0, "done")
@@ -289,7 +312,8 @@ def likelihood_job(intensity_path, segments_path, likelihood_path, hypotheses_pa
     stage 3). ``options`` go to :func:`gisroads.lidar.hypotheses.road_hypotheses`
     (``widths_m``, ``lengths_m``, ``t_bd``, ``t_int``, ...) and ``l_max`` to the maps.
     Writes ``likelihood_path`` (one band per width) and ``hypotheses_path`` (GeoPackage,
-    layer ``hypotheses``).
+    layer ``hypotheses``); no valid hypothesis gives zero maps, an empty layer and a
+    :class:`~gisroads.errors.NoRoadFoundWarning`.
     """
     from .features.edges import local_energy
     from .lidar.hypotheses import DEFAULT_WIDTHS_M, L_MAX, likelihood_maps, road_hypotheses
@@ -304,12 +328,11 @@ def likelihood_job(intensity_path, segments_path, likelihood_path, hypotheses_pa
     magnitude, orientation = local_energy(image.data)
     report(progress, 0.2, "hypotheses")
     hypotheses = road_hypotheses(image, magnitude, orientation, segments.data[0], **options)
-    if len(hypotheses) == 0:
-        raise ValueError(f"{intensity_path}: no valid road hypothesis on level {level}")
     report(progress, 0.8, "likelihood maps")
     maps = likelihood_maps(hypotheses, image, widths_m=widths_m, l_max=l_max)
     write_geotiff(likelihood_path, maps, band_names=[f"width_{w:g}_m" for w in widths_m])
     write_geopackage(hypotheses_path, {"hypotheses": hypotheses.assign(level=level)})
+    _warn_if_empty(hypotheses, f"{intensity_path} (level {level})", "valid road hypothesis")
     report(progress, 1.0, "done")
     return {"likelihood": Path(likelihood_path), "hypotheses": Path(hypotheses_path),
             "n_hypotheses": len(hypotheses)}
@@ -320,7 +343,8 @@ def min_cover_job(hypotheses_path, likelihood_path, rectangles_path, *, exact: b
     """Stage 5: the minimum cover of the hypotheses (greedy, or the exact integer program
     for small instances). ``hypotheses_path`` is a file (its ``hypotheses`` layer) or a
     GeoDataFrame. ``options``: ``l_max``, ``a``, ``d_max`` (greedy only), ``seed_step_m``.
-    Writes ``rectangles_path`` (GeoPackage, layer ``rectangles``)."""
+    Writes ``rectangles_path`` (GeoPackage, layer ``rectangles``); an empty cover gives an
+    empty layer and a :class:`~gisroads.errors.NoRoadFoundWarning`."""
     from .lidar.hypotheses import L_MAX
     from .lidar.mincover import exact_min_cover, greedy_min_cover
 
@@ -337,9 +361,8 @@ def min_cover_job(hypotheses_path, likelihood_path, rectangles_path, *, exact: b
         selected = exact_min_cover(hypotheses, likelihood, **options)
     else:
         selected = greedy_min_cover(hypotheses, likelihood, progress=progress, **options)
-    if len(selected) == 0:
-        raise ValueError(f"{hypotheses_path}: the cover selected no rectangle")
     write_geopackage(rectangles_path, {"rectangles": selected})
+    _warn_if_empty(selected, hypotheses_path, "road rectangle")
     return {"rectangles": Path(rectangles_path), "n_rectangles": len(selected),
             "cover_cost": float(selected.attrs["cover_cost"])}
 
@@ -347,7 +370,8 @@ def min_cover_job(hypotheses_path, likelihood_path, rectangles_path, *, exact: b
 def rectangles_network_job(rectangles_path, out_path) -> dict:
     """Stage 6: road rectangles (a file's ``rectangles`` layer, any polygon layer or a
     GeoDataFrame with ``width_m`` and ``theta_rad``) to the road-network GeoPackage (centre
-    lines, polygons, junctions, and the rectangles)."""
+    lines, polygons, junctions, and the rectangles); no rectangle gives empty layers and a
+    :class:`~gisroads.errors.NoRoadFoundWarning`."""
     from .vectorize.ribbons import rectangles_to_network
 
     rectangles = _layer(rectangles_path, "rectangles")
@@ -355,10 +379,9 @@ def rectangles_network_job(rectangles_path, out_path) -> dict:
     if missing:
         raise ValueError(f"{rectangles_path}: the rectangles need fields {sorted(missing)}")
     network = rectangles_to_network(rectangles)
-    if len(network.centrelines) == 0:
-        raise ValueError(f"{rectangles_path}: no road found")
     network.qa = {"rectangles": rectangles}
     write_geopackage(out_path, network.layers())
+    _warn_if_no_road(network, rectangles_path)
     return {"gpkg": Path(out_path), "roads": len(network.centrelines),
             "length_m": float(network.centrelines.length_m.sum()),
             "junctions": len(network.junctions)}
@@ -373,7 +396,8 @@ def tag_job(cloud_path, polygons_path, out_path, *, heights_path=None,
     (``heights_path``, in the cloud's metre working CRS) or, without it, from the cloud's
     own ground planes (:func:`gisroads.lidar.tagging.ground_level_heights`: the whole cloud
     in memory), e.g. for ribbon-snake polygons. Polygons in any CRS are reprojected to the
-    cloud's.
+    cloud's. Without polygons the cloud is copied with no point tagged, with a
+    :class:`~gisroads.errors.NoRoadFoundWarning`.
     """
     from .io.las import cloud_crs, read_las
     from .lidar.tagging import ground_level_heights, tag_road_points
@@ -381,12 +405,15 @@ def tag_job(cloud_path, polygons_path, out_path, *, heights_path=None,
     working, _ = cloud_crs(cloud_path)
     polygons = read_layer(polygons_path, POLYGONS if str(polygons_path).endswith(".gpkg")
                           and POLYGONS in list_layers(polygons_path) else None)
-    if len(polygons) == 0:
-        raise ValueError(f"{polygons_path}: no road polygon")
     if working is not None and polygons.crs is not None:
         polygons = polygons.to_crs(working)
-    heights = (read_raster(heights_path) if heights_path is not None
-               else ground_level_heights(read_las(cloud_path)))
+    if len(polygons) == 0:
+        warnings.warn(f"no road polygon in {polygons_path}; wrote the cloud with no point "
+                      "tagged", NoRoadFoundWarning, stacklevel=2)
+        heights = None  # without polygons no point is looked up in them
+    else:
+        heights = (read_raster(heights_path) if heights_path is not None
+                   else ground_level_heights(read_las(cloud_path)))
     tagged = tag_road_points(cloud_path, out_path, polygons, heights, tolerance_m=tolerance_m)
     return {"tagged_las": Path(out_path), "tagged_points": tagged}
 
@@ -529,7 +556,8 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     nir and dsm were used), road_polygons, junctions and the QA layers segments,
     road_parts, gap_edges and junction_connections, in the image's CRS; optionally a
     ``quicklook`` PNG. ``options`` go to
-    :func:`gisroads.imagery.pipeline.extract_image_roads`.
+    :func:`gisroads.imagery.pipeline.extract_image_roads`. An image without roads gives
+    empty layers and a :class:`~gisroads.errors.NoRoadFoundWarning`.
     """
     from .imagery.pipeline import extract_image_roads
 
@@ -543,12 +571,11 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     roads = extract_image_roads(image, nir_band=nir_band, red_band=red_band, dsm=dsm,
                                 progress=scaled(progress, 0.0, 0.95), **options)
     network = roads.network
-    if len(network.centrelines) == 0:
-        raise ValueError(f"{image_path}: no road found")
     layers = network.layers()
     if source_crs is not None and source_crs != image.crs:
         layers = {name: frame.to_crs(source_crs) for name, frame in layers.items()}
     write_geopackage(out_path, layers)
+    _warn_if_no_road(network, image_path)
     result = {"gpkg": Path(out_path), "roads": len(network.centrelines),
               "length_m": float(network.centrelines.length_m.sum()),
               "junctions": len(network.junctions), "cues": roads.report["cues"]["cues"],
@@ -606,7 +633,8 @@ def snakes_job(cloud_path, map_source, out_path, *, curb_detector: str = "exp",
     Writes ``out_path`` (road_centrelines, road_polygons, junctions and the QA layers
     ribbon_patches and registered_map) in the cloud's CRS; optionally ``tagged_las`` (the
     cloud with road points in class 11) and ``attractor_tif`` (the patches' attractor
-    maps). ``options`` go to :func:`gisroads.snakes.pipeline.extract_map_guided`.
+    maps). ``options`` go to :func:`gisroads.snakes.pipeline.extract_map_guided`. When
+    no road is fitted the layers are empty, with a :class:`~gisroads.errors.NoRoadFoundWarning`.
     """
     from .snakes.pipeline import extract_map_guided
 
@@ -615,6 +643,7 @@ def snakes_job(cloud_path, map_source, out_path, *, curb_detector: str = "exp",
                                **options)
     network = roads.network
     write_geopackage(out_path, network.layers())
+    _warn_if_no_road(network, cloud_path)
     result = {"gpkg": Path(out_path), "roads": len(network.centrelines),
               "length_m": float(network.centrelines.length_m.sum()),
               "junctions": len(network.junctions), "patches": len(roads.ribbons),

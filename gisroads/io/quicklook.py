@@ -53,7 +53,7 @@ def write_quicklook(path, layers, *, background: GeoRaster | None = None, title:
         for frame, style in layers:
             if len(frame):
                 frame.plot(ax=ax, **style)
-        if any("label" in style for _, style in layers):
+        if any("label" in style and len(frame) for frame, style in layers):  # drawn ones
             ax.legend(loc="upper right", fontsize=9, framealpha=0.8)
         ax.set_title(title)
         ax.set_aspect("equal")

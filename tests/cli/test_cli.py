@@ -8,6 +8,7 @@ import pytest
 import shapely
 
 from gisroads.io.vector import list_layers, read_layer, write_geopackage
+from tests.road_layers import assert_empty_road_layers
 
 
 def gisroads(*args, cwd=None):
@@ -111,6 +112,28 @@ def test_lidar_writes_network_tagged_cloud_and_quicklook(tmp_path):
     tagged = read_las(tmp_path / "tagged.laz")
     assert (tagged.classification == 11).sum() == summary["tagged_points"]
     assert (tmp_path / "roads.png").stat().st_size > 10_000
+
+
+def test_lidar_on_a_forest_plot_writes_empty_layers_and_warns(lidar_dir, tmp_path):
+    forest = lidar_dir / "Megaplot.laz"  # 227 m x 234 m of forest: no road, under a tile
+    result = gisroads("lidar", forest, "-o", tmp_path / "roads.gpkg", "--tagged-las",
+                      tmp_path / "tagged.laz", "--quicklook", tmp_path / "roads.png", "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert (summary["roads"], summary["length_m"], summary["tagged_points"]) == (0, 0.0, 0)
+    assert result.stderr.strip() == (f"gisroads: warning: no road found in {forest}; "
+                                     "wrote empty layers")
+    assert list_layers(tmp_path / "roads.gpkg") == [
+        "road_centrelines", "road_polygons", "junctions", "rectangles", "hypotheses"]
+    assert_empty_road_layers(tmp_path / "roads.gpkg")
+    assert (tmp_path / "roads.png").stat().st_size > 10_000
+    # a corrupt cloud is still an error that writes nothing
+    cut = tmp_path / "cut.laz"
+    cut.write_bytes(forest.read_bytes()[:100_000])
+    broken = gisroads("lidar", cut, "-o", tmp_path / "cut.gpkg")
+    assert broken.returncode == 2 and broken.stderr.startswith("gisroads: error: ")
+    assert len(broken.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "cut.gpkg").exists()
 
 
 def test_demo_runs_both_pipelines_on_the_bundled_data(tmp_path):

@@ -8,6 +8,7 @@ import pytest
 from affine import Affine
 from pyproj import CRS
 
+from gisroads.errors import NoRoadFoundWarning
 from gisroads.geo import GeoRaster
 from gisroads.io.raster import RasterError, write_geotiff
 from gisroads.io.vector import list_layers, read_layer
@@ -15,6 +16,7 @@ from gisroads.jobs import image_job, read_image
 from gisroads.progress import Cancelled
 from gisroads.synthetic import make_scene
 from gisroads.synthetic.image import write_image
+from tests.road_layers import assert_empty_road_layers
 
 
 def gisroads(*args):
@@ -62,14 +64,23 @@ def test_a_geographic_image_is_read_in_its_utm_zone(shared_data):
 GRID = Affine(0.5, 0, 500000.0, 0, -0.5, 4500000.0)
 
 
-def test_an_image_without_roads_is_an_error_and_writes_nothing(tmp_path):
+def test_an_image_without_roads_gives_empty_layers_and_a_warning(tmp_path):
     rng = np.random.default_rng(0)
     lawn = np.array([80.0, 112.0, 52.0])[:, None, None] + rng.normal(0, 4, (3, 400, 400))
     write_geotiff(tmp_path / "lawn.tif", GeoRaster(lawn.clip(0, 255).astype(np.uint8), GRID,
                                                    CRS("EPSG:32633")))
-    with pytest.raises(ValueError, match="no road found"):
-        image_job(tmp_path / "lawn.tif", tmp_path / "roads.gpkg")
-    assert list(tmp_path.iterdir()) == [tmp_path / "lawn.tif"]
+    with pytest.warns(NoRoadFoundWarning, match="no road found in .*lawn.tif; wrote empty"):
+        result = image_job(tmp_path / "lawn.tif", tmp_path / "roads.gpkg")
+    assert (result["roads"], result["length_m"], result["junctions"]) == (0, 0.0, 0)
+    assert_empty_road_layers(tmp_path / "roads.gpkg")
+    command = gisroads("image", tmp_path / "lawn.tif", "-o", tmp_path / "cli.gpkg",
+                       "--quicklook", tmp_path / "cli.png", "--json")
+    assert command.returncode == 0, command.stderr
+    assert json.loads(command.stdout)["roads"] == 0
+    assert command.stderr.strip() == (f"gisroads: warning: no road found in "
+                                      f"{tmp_path / 'lawn.tif'}; wrote empty layers")
+    assert_empty_road_layers(tmp_path / "cli.gpkg")
+    assert (tmp_path / "cli.png").stat().st_size > 10_000
 
 
 @pytest.mark.parametrize("content, message", [
