@@ -1,7 +1,7 @@
 """QGIS layers, parameters and feedback <-> gisroads' GeoDataFrames and callbacks, in one place."""
 from __future__ import annotations
 
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 
 import geopandas as gpd
 import numpy as np
@@ -13,6 +13,7 @@ from qgis.core import (QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink,
                        QgsProcessingLayerPostProcessorInterface, QgsVectorLayer, QgsWkbTypes)
 from qgis.PyQt.QtCore import QVariant
 
+from gisroads.errors import reported_warnings
 from gisroads.io.las import LasError
 from gisroads.io.raster import RasterError
 from gisroads.io.vector import STYLES_DIR
@@ -31,6 +32,11 @@ def to_qgis(crs) -> QgsCoordinateReferenceSystem:
     return QgsCoordinateReferenceSystem.fromWkt(CRS.from_user_input(crs).to_wkt())
 
 
+#: pandas dtypes of QGIS field types (others: object).
+_DTYPES = {QVariant.Int: "int64", QVariant.LongLong: "int64", QVariant.UInt: "int64",
+           QVariant.ULongLong: "int64", QVariant.Double: "float64", QVariant.Bool: "bool"}
+
+
 def source_to_frame(source, feedback=None) -> gpd.GeoDataFrame:
     """A QgsFeatureSource (layer or selection) as a GeoDataFrame in the source's CRS."""
     if source is None:
@@ -46,7 +52,11 @@ def source_to_frame(source, feedback=None) -> gpd.GeoDataFrame:
         # PyQt hands NULL attributes over as QVariant; every other value arrives as Python
         rows.append([None if isinstance(v, QVariant) else v for v in feature.attributes()])
     geometries = shapely.from_wkb(np.array(wkb, dtype=object)) if wkb else []
-    frame = pd.DataFrame(rows, columns=names) if rows else pd.DataFrame(columns=names)
+    if rows:
+        frame = pd.DataFrame(rows, columns=names)
+    else:  # an empty layer keeps its field types (a writer refuses a text fid, for one)
+        frame = pd.DataFrame({field.name(): pd.Series(dtype=_DTYPES.get(field.type(), object))
+                              for field in source.fields()})
     return gpd.GeoDataFrame(frame, geometry=gpd.GeoSeries(geometries, index=frame.index),
                             crs=to_pyproj(source.sourceCrs()))
 
@@ -103,12 +113,15 @@ def progress_callback(feedback):
 
 
 @contextmanager
-def gisroads_errors():
+def gisroads_errors(feedback=None):
     """Turn gisroads' input errors and a cancel into QgsProcessingException (exit 1 in
     qgis_process, a message box in the desktop); stages write atomically, so nothing
-    half-written is left."""
+    half-written is left. With ``feedback``, gisroads' warnings (no road found: empty
+    layers written, the algorithm succeeds) are pushed to it as warnings."""
     try:
-        yield
+        with (reported_warnings(feedback.pushWarning) if feedback is not None
+              else nullcontext()):
+            yield
     except Cancelled:
         raise QgsProcessingException("cancelled; nothing was written") from None
     except (LasError, RasterError, ValueError, FileNotFoundError) as err:

@@ -59,7 +59,7 @@ class ImageryRoadNetwork(GisroadsAlgorithm):
         options = {}
         if parameters.get("SEGMENTS") not in (None, ""):
             options["n_segments"] = self.parameterAsInt(parameters, "SEGMENTS", context)
-        with gisroads_errors():
+        with gisroads_errors(feedback):
             result = image_job(
                 self.parameterAsRasterLayer(parameters, "INPUT", context).source(), out,
                 **band_options(self, parameters, context),

@@ -64,7 +64,7 @@ class LidarLikelihood(GisroadsAlgorithm):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
         hypotheses = self.parameterAsFileOutput(parameters, "HYPOTHESES", context)
-        with gisroads_errors():
+        with gisroads_errors(feedback):
             result = likelihood_job(
                 self.parameterAsRasterLayer(parameters, "INPUT", context).source(),
                 self.parameterAsRasterLayer(parameters, "SEGMENTS", context).source(),

@@ -67,7 +67,7 @@ class LidarMinCover(GisroadsAlgorithm):
         if not exact:
             options["d_max"] = self.parameterAsDouble(parameters, "D_MAX", context)
             options["progress"] = progress_callback(feedback)
-        with gisroads_errors():
+        with gisroads_errors(feedback):
             hypotheses = source_to_frame(
                 self.parameterAsSource(parameters, "INPUT", context), feedback)
             result = min_cover_job(

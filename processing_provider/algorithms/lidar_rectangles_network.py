@@ -35,7 +35,7 @@ class RectanglesToNetwork(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
-        with gisroads_errors():
+        with gisroads_errors(feedback):
             rectangles = source_to_frame(self.parameterAsSource(parameters, "INPUT", context),
                                          feedback)
             result = rectangles_network_job(rectangles, out)

@@ -70,7 +70,7 @@ class LidarRoadNetwork(GisroadsAlgorithm):
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
         tagged = self.parameterAsFileOutput(parameters, "TAGGED_LAS", context) or None
         rasters = self.parameterAsString(parameters, "RASTERS", context) or None
-        with gisroads_errors():
+        with gisroads_errors(feedback):
             result = lidar_job(
                 self.parameterAsFile(parameters, "INPUT", context), out, tagged_las=tagged,
                 rasters_dir=rasters, progress=progress_callback(feedback),

@@ -51,7 +51,7 @@ class RibbonSnakeRoads(GisroadsAlgorithm):
         tagged = self.parameterAsFileOutput(parameters, "TAGGED_LAS", context) or None
         attractor = self.parameterAsOutputLayer(parameters, "ATTRACTOR", context) or None
         cloud, lines, options = map_guided_arguments(self, parameters, context, feedback)
-        with gisroads_errors():
+        with gisroads_errors(feedback):
             result = snakes_job(cloud, lines, out, tagged_las=tagged, attractor_tif=attractor,
                                 progress=progress_callback(feedback), **options)
         load_geopackage_on_completion(context, out, ("ribbon_patches", POLYGONS, CENTRELINES,

@@ -48,7 +48,7 @@ class TagRoadPoints(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
-        with gisroads_errors():
+        with gisroads_errors(feedback):
             result = tag_job(self.parameterAsFile(parameters, "INPUT", context),
                              self.parameterAsFile(parameters, "POLYGONS", context), out,
                              heights_path=self.parameterAsFile(parameters, "HEIGHTS",

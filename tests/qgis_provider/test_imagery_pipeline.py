@@ -7,6 +7,7 @@ from gisroads.evaluate import buffer_metrics
 from gisroads.geo import GeoRaster
 from gisroads.io.raster import write_geotiff
 from gisroads.io.vector import list_layers, read_layer
+from tests.road_layers import assert_empty_road_layers
 
 
 def test_imagery_road_network_uses_nir_and_dsm(qgis_process, scene_dir, tmp_path):
@@ -29,7 +30,8 @@ def test_imagery_band_the_image_lacks_fails_cleanly(qgis_process, scene_dir, tmp
     assert not (tmp_path / "r.gpkg").exists()
 
 
-def test_an_image_without_roads_fails_cleanly(qgis_process, tmp_path):
+def test_an_image_without_roads_succeeds_with_empty_layers_and_a_warning(qgis_process,
+                                                                        tmp_path):
     rng = np.random.default_rng(0)
     lawn = np.array([80.0, 112.0, 52.0])[:, None, None] + rng.normal(0, 4, (3, 300, 300))
     write_geotiff(tmp_path / "lawn.tif",
@@ -38,5 +40,8 @@ def test_an_image_without_roads_fails_cleanly(qgis_process, tmp_path):
     result = qgis_process("run", "gisroads:imageryroadnetwork", "--",
                           f"INPUT={tmp_path / 'lawn.tif'}", f"OUTPUT={tmp_path / 'r.gpkg'}",
                           check=False)
-    assert result.returncode == 1 and "no road found" in result.stdout + result.stderr
-    assert not (tmp_path / "r.gpkg").exists()
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert (f"no road found in {tmp_path / 'lawn.tif'}; wrote empty layers"
+            in result.stdout + result.stderr)
+    assert "ROADS:\t0" in result.stdout
+    assert_empty_road_layers(tmp_path / "r.gpkg")

@@ -4,7 +4,7 @@ from pathlib import Path
 import geopandas as gpd
 import pytest
 import shapely
-from qgis.core import QgsProcessingException, QgsProcessingFeedback, QgsVectorLayer
+from qgis.core import QgsProcessingException, QgsProcessingFeedback, QgsVectorLayer, QgsWkbTypes
 
 from gisroads.synthetic import make_scene
 from gisroads.synthetic.image import write_image
@@ -46,6 +46,37 @@ def test_cancel_during_the_imagery_pipeline_leaves_no_output(run_algorithm, tmp_
                                              "OUTPUT": str(tmp_path / "roads.gpkg")}, feedback)
     assert 45 < max(percents) < 100
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dsm.tif", "image.tif"]
+
+
+class RecordedFeedback(QgsProcessingFeedback):
+    """Feedback that keeps the warnings an algorithm pushes."""
+
+    def __init__(self):
+        super().__init__()
+        self.warnings = []
+
+    def pushWarning(self, text):  # noqa: N802
+        self.warnings.append(text)
+        super().pushWarning(text)
+
+
+def test_a_forest_plot_succeeds_with_empty_typed_layers_and_a_warning(run_algorithm,
+                                                                      lidar_dir, tmp_path):
+    forest = lidar_dir / "Megaplot.laz"
+    feedback = RecordedFeedback()
+    result = run_algorithm("lidarroadnetwork", {"INPUT": str(forest),
+                                                "OUTPUT": str(tmp_path / "roads.gpkg")},
+                           feedback)
+    assert (result["ROADS"], result["LENGTH_M"], result["JUNCTIONS"]) == (0, 0, 0)
+    assert feedback.warnings == [f"no road found in {forest}; wrote empty layers"]
+    for name, geometry in (("road_centrelines", QgsWkbTypes.LineGeometry),
+                           ("road_polygons", QgsWkbTypes.PolygonGeometry),
+                           ("junctions", QgsWkbTypes.PointGeometry),
+                           ("rectangles", QgsWkbTypes.PolygonGeometry),
+                           ("hypotheses", QgsWkbTypes.PolygonGeometry)):
+        layer = QgsVectorLayer(f"{tmp_path / 'roads.gpkg'}|layername={name}", name, "ogr")
+        assert layer.isValid() and layer.featureCount() == 0, name
+        assert layer.isSpatial() and layer.geometryType() == geometry, name
 
 
 def test_layer_to_frame_keeps_geometry_attributes_nulls_and_crs(qgis_app, tmp_path):

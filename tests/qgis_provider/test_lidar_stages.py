@@ -3,9 +3,11 @@ previous one's output and gives exactly what the same stage gives from Python.""
 import numpy as np
 import pytest
 
+from gisroads.io.las import read_las
 from gisroads.io.raster import read_raster
 from gisroads.io.vector import list_layers, read_layer
 from gisroads.jobs import ground_intensity_job, lidar_segmentation_job
+from tests.road_layers import assert_empty_road_layers
 
 
 @pytest.fixture(scope="module")
@@ -70,3 +72,31 @@ def test_a_stage_refuses_a_level_the_image_lacks(qgis_process, stages, tmp_path)
                           f"OUTPUT={tmp_path / 's.tif'}", check=False)
     assert result.returncode == 1 and "no level 9" in result.stdout + result.stderr
     assert not (tmp_path / "s.tif").exists()
+
+
+def test_every_stage_of_a_forest_plot_succeeds_with_empty_layers(qgis_process, lidar_dir,
+                                                                 tmp_path):
+    forest = lidar_dir / "Megaplot.laz"
+    qgis_process.run("lidargroundintensity", INPUT=forest, OUTPUT=tmp_path / "intensity.tif",
+                     HEIGHTS=tmp_path / "heights.tif")
+    qgis_process.run("lidarsegmentation", INPUT=tmp_path / "intensity.tif",
+                     OUTPUT=tmp_path / "segments.tif")
+    likelihood = qgis_process.run(
+        "lidarlikelihood", INPUT=tmp_path / "intensity.tif", SEGMENTS=tmp_path / "segments.tif",
+        OUTPUT=tmp_path / "likelihood.tif", HYPOTHESES=tmp_path / "hyps.gpkg")
+    # the empty hypotheses layer is a polygon layer QGIS takes as the next stage's input
+    cover = qgis_process.run(
+        "lidarmincover", INPUT=f"{tmp_path / 'hyps.gpkg'}|layername=hypotheses",
+        LIKELIHOOD=tmp_path / "likelihood.tif", OUTPUT=tmp_path / "rectangles.gpkg")
+    args = ["run", "gisroads:rectanglestonetwork", "--",
+            f"INPUT={tmp_path / 'rectangles.gpkg'}|layername=rectangles",
+            f"OUTPUT={tmp_path / 'roads.gpkg'}"]
+    network = qgis_process(*args)
+    tagged = qgis_process.run("tagroadpoints", INPUT=forest, POLYGONS=tmp_path / "roads.gpkg",
+                              OUTPUT=tmp_path / "tagged.laz")
+    assert likelihood["N_HYPOTHESES"] == cover["N_RECTANGLES"] == tagged["TAGGED"] == 0
+    assert "no road found in" in network.stdout + network.stderr
+    assert "ROADS:\t0" in network.stdout
+    assert_empty_road_layers(tmp_path / "roads.gpkg")
+    assert read_las(tmp_path / "tagged.laz").classification.tolist() == \
+        read_las(forest).classification.tolist()
