@@ -151,6 +151,15 @@ def cmd_image(args) -> int:
     return 0
 
 
+def cmd_vectorize(args) -> int:
+    from .jobs import vectorize_job
+    result = vectorize_job(args.input, args.out, band=args.band, threshold=args.threshold,
+                           pixel_m=args.pixel, crs=args.crs, quicklook=args.quicklook,
+                           progress=_ProgressBar(not args.json))
+    _print(result, args.json)
+    return 0
+
+
 def cmd_snakes(args) -> int:
     from .jobs import snakes_job
     result = snakes_job(args.input, args.map, args.out, curb_detector=args.curb_detector,
@@ -345,6 +354,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pixel", type=_positive,
                    help="pixel size in metres, for an image without georeferencing")
     p.add_argument("--crs", help="projected CRS for an image without georeferencing, "
+                                 "e.g. EPSG:32633")
+    p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
+
+    p = add("vectorize", cmd_vectorize, "any road raster (mask or probability) to a network",
+            "Turn a road raster (a binary mask, or a road probability 0-1 or 0-255: a "
+            "deep-learning segmentation, a classified land-cover map, a thresholded index) "
+            "into a clean, connected road network: smoothed, thresholded and cleaned, "
+            "skeletonised tile by tile, spurs pruned, junction clusters contracted into single "
+            "nodes, gaps across occlusions bridged by an integer program, junctions built, "
+            "insignificant pieces dropped. Writes road centre lines with widths (from the "
+            "raster), road polygons, junctions and the QA layers gap_edges, "
+            "junction_connections and rejected to a GeoPackage in the raster's CRS.")
+    add_source_and_out(p, "input", "road raster: GeoTIFF (or PNG with --pixel and --crs)")
+    p.add_argument("--threshold", type=float, default=0.5,
+                   help="road probability threshold, 0-1 (a 0-255 raster is scaled to 0-1 "
+                        "first; default 0.5)")
+    p.add_argument("--band", type=int, default=1, help="1-based band to read (default 1)")
+    p.add_argument("--pixel", type=_positive,
+                   help="pixel size in metres, for a raster without georeferencing")
+    p.add_argument("--crs", help="projected CRS for a raster without georeferencing, "
                                  "e.g. EPSG:32633")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
 

@@ -693,6 +693,45 @@ def demo_job(out_dir, *, data_dir=DEMO_DATA, progress: Progress = None) -> dict:
             "image_report": format_report(evaluation), "lidar": lidar}
 
 
+def vectorize_job(raster_path, out_path, *, band: int = 1, threshold: float = 0.5,
+                  pixel_m: float | None = None, crs=None, quicklook=None,
+                  progress: Progress = None) -> dict:
+    """Any road raster (mask or probability) to a road network in a GeoPackage.
+
+    Writes road_centrelines, road_polygons, junctions and the QA layers gap_edges,
+    junction_connections and rejected in the raster's CRS (a geographic raster is worked
+    in its UTM zone); optionally a ``quicklook`` PNG. See
+    :func:`gisroads.network.rasters.raster_to_network`.
+    """
+    from .network.rasters import raster_to_network
+
+    raster, source_crs = read_image(raster_path, pixel_m=pixel_m, crs=crs)
+    network = raster_to_network(raster, band=band, threshold=threshold,
+                                progress=scaled(progress, 0.0, 0.95))
+    layers = network.layers()
+    if source_crs is not None and source_crs != raster.crs:
+        layers = {name: frame.to_crs(source_crs) for name, frame in layers.items()}
+    write_geopackage(out_path, layers)
+    _warn_if_no_road(network, raster_path)
+    result = {"gpkg": Path(out_path), "roads": len(network.centrelines),
+              "length_m": float(network.centrelines.length_m.sum()),
+              "junctions": len(network.junctions),
+              "gaps_bridged": int(network.qa["gap_edges"]["selected"].sum())}
+    if quicklook is not None:
+        report(progress, 0.97, "drawing the quick-look")
+        write_quicklook(quicklook, [
+            (network.qa["rejected"], dict(color="grey", linewidth=1, label="rejected")),
+            (network.qa["gap_edges"].query("selected"),
+             dict(color="cyan", linewidth=2, label="bridged gaps")),
+            (network.centrelines, dict(color="red", linewidth=1.5, label="road centre lines")),
+            (network.junctions, dict(color="yellow", markersize=20, label="junctions")),
+        ], background=raster, title=f"{Path(raster_path).name}: {len(network.centrelines)} "
+                                     f"roads, {len(network.junctions)} junctions")
+        result["quicklook"] = Path(quicklook)
+    report(progress, 1.0, "done")
+    return result
+
+
 # --- road database update (issue 11) -------------------------------------------------------
 
 def _coverage(path) -> GeoRaster | gpd.GeoDataFrame:

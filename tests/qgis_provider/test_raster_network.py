@@ -1,0 +1,51 @@
+"""'Road raster to network' through qgis_process: a geographic 8-bit mask with a cut T."""
+import geopandas as gpd
+import numpy as np
+import pytest
+import rasterio
+from rasterio.transform import from_origin
+
+from gisroads.io.vector import list_layers
+
+
+def write_mask(path, mask, transform, crs):
+    with rasterio.open(path, "w", driver="GTiff", width=mask.shape[1], height=mask.shape[0],
+                       count=1, dtype="uint8", crs=crs, transform=transform, nodata=None) as dst:
+        dst.write(mask, 1)
+    return path
+
+
+def t_mask():
+    """A T of 8 m roads at 0.5 m pixels, the stem cut by a 6 m gap (0-255 values)."""
+    mask = np.zeros((400, 400), np.uint8)
+    mask[192:208, :] = 255
+    mask[200:, 192:208] = 255
+    mask[290:302, 192:208] = 0
+    return mask
+
+
+def test_geographic_mask_gives_one_t_junction_and_bridges_the_cut(qgis_process, tmp_path):
+    # about 0.5 m pixels near 45 N, in degrees
+    raster = write_mask(tmp_path / "roads.tif", t_mask(),
+                        from_origin(15.0, 45.0, 0.5 / 78_850, 0.5 / 111_130), "EPSG:4326")
+    out = tmp_path / "network.gpkg"
+    result = qgis_process.run("roadrastertonetwork", INPUT=raster, THRESHOLD=0.5, OUTPUT=out)
+    assert result["JUNCTIONS"] == 1 and result["GAPS_BRIDGED"] == 1
+    assert result["ROADS"] == 3
+    assert result["LENGTH_M"] == pytest.approx(300.0, rel=0.05)
+    assert set(list_layers(out)) >= {"road_centrelines", "road_polygons", "junctions",
+                                     "gap_edges", "junction_connections", "rejected"}
+    centrelines = gpd.read_file(out, layer="road_centrelines")
+    assert centrelines.crs == "EPSG:4326"                     # back in the raster's CRS
+    np.testing.assert_allclose(centrelines.width_m, 8.0, atol=1.0)
+    assert gpd.read_file(out, layer="junctions").degree.tolist() == [3]
+
+
+def test_raster_without_roads_gives_empty_layers_and_a_warning(qgis_process, tmp_path):
+    raster = write_mask(tmp_path / "empty.tif", np.zeros((100, 100), np.uint8),
+                        from_origin(500000, 4500000, 1.0, 1.0), "EPSG:32633")
+    out = tmp_path / "empty.gpkg"
+    completed = qgis_process("--json", "run", "gisroads:roadrastertonetwork", "--",
+                             f"INPUT={raster}", f"OUTPUT={out}")
+    assert "no road found" in completed.stdout + completed.stderr
+    assert len(gpd.read_file(out, layer="road_centrelines")) == 0
