@@ -1,11 +1,15 @@
-"""The gisroads Processing provider: one algorithm per module of ``algorithms/``."""
+"""The gisroads Processing provider: one algorithm per module of ``algorithms/``, and the
+Processing models of ``models/`` (``.model3`` files chaining those algorithms)."""
 import importlib
 import pkgutil
+from pathlib import Path
 
-from qgis.core import QgsProcessingProvider
+from qgis.core import QgsProcessingModelAlgorithm, QgsProcessingProvider
 
 from . import algorithms
 from .algorithms.base import GisroadsAlgorithm
+
+MODELS_DIR = Path(__file__).resolve().parent / "models"
 
 
 def algorithm_classes() -> list[type[GisroadsAlgorithm]]:
@@ -33,3 +37,8 @@ class GisroadsProvider(QgsProcessingProvider):
     def loadAlgorithms(self):  # noqa: N802
         for algorithm_class in algorithm_classes():
             self.addAlgorithm(algorithm_class())
+        for path in sorted(MODELS_DIR.glob("*.model3")):
+            model = QgsProcessingModelAlgorithm()
+            if not model.fromFile(str(path)):
+                raise RuntimeError(f"{path}: not a Processing model")
+            self.addAlgorithm(model)

@@ -12,15 +12,20 @@ from gisroads.io.las import read_las
 from gisroads.io.vector import list_layers, read_layer, write_geopackage
 
 ALGORITHM_DIR = Path(__file__).resolve().parents[2] / "processing_provider" / "algorithms"
-# every NAME = "..." declared by a module of processing_provider/algorithms
+MODEL_DIR = ALGORITHM_DIR.parent / "models"
+# every NAME = "..." declared by a module of processing_provider/algorithms, and the name of
+# every Processing model shipped in processing_provider/models
 ALGORITHMS = sorted(re.findall(r'^    NAME = "(\w+)"', "".join(
-    p.read_text() for p in ALGORITHM_DIR.glob("*.py")), flags=re.M))
+    p.read_text() for p in ALGORITHM_DIR.glob("*.py")), flags=re.M) + re.findall(
+    r'name="model_name" value="([^"]+)"', "".join(
+        p.read_text() for p in MODEL_DIR.glob("*.model3"))))
 
 
 def test_provider_lists_every_algorithm(qgis_process):
-    listed = re.findall(r"^\s*gisroads:(\w+)", qgis_process("list").stdout, flags=re.M)
+    listed = re.findall(r"^\s*gisroads:([^\t]+)\t", qgis_process("list").stdout, flags=re.M)
     assert sorted(listed) == ALGORITHMS
     assert len(ALGORITHMS) >= 5
+    assert any(" " in name for name in ALGORITHMS)  # a model is listed
 
 
 def test_every_parameter_has_help(qgis_process):
