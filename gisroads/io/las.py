@@ -75,6 +75,8 @@ class PointCloud:
 #: LASzip's first compressor: the points of the whole file form one stream that starts right
 #: at the point-data offset, with no chunk table and no offset to one (LAS 1.0-1.2 era).
 _LASZIP_POINTWISE = 1
+#: Byte offset of the chunk size (uint32) in the LASzip VLR's record data.
+_LASZIP_CHUNK_SIZE_AT = 12
 
 
 def _laszip_compressor(header: laspy.LasHeader) -> int | None:
@@ -134,10 +136,24 @@ def _open(path) -> laspy.LasReader:
         raise
     if reader.header.are_points_compressed and \
             _laszip_compressor(reader.header) == _LASZIP_POINTWISE:
-        # lazrs's parallel decoder needs a chunk table; laspy would try it first and log
-        # its failure before falling back. The decoder is made on the first read.
-        reader.laz_backend = laspy.LazBackend.Lazrs
+        _decode_pointwise(reader)
     return reader
+
+
+def _decode_pointwise(reader: laspy.LasReader) -> None:
+    """Set up an opened pointwise LAZ file for lazrs's sequential decoder (made on the
+    first read): its parallel decoder needs a chunk table, and laspy would try it first and
+    log its failure. A pointwise stream is one chunk whatever its VLR's chunk size says, but
+    lazrs takes the 0 that the first LASzip releases wrote (like 2**32 - 1) for variable-size
+    chunks, which need a chunk table: such a size is replaced, in memory, by LASzip's default.
+    """
+    reader.laz_backend = laspy.LazBackend.Lazrs
+    laszip = reader.header.vlrs.get("LasZipVlr")[0]
+    record = bytearray(laszip.record_data)
+    at = slice(_LASZIP_CHUNK_SIZE_AT, _LASZIP_CHUNK_SIZE_AT + 4)
+    if int.from_bytes(record[at], "little") in (0, 2**32 - 1):
+        record[at] = (50_000).to_bytes(4, "little")
+        laszip.record_data = bytes(record)
 
 
 def _vertical_unit_from_geokeys(header: laspy.LasHeader) -> tuple[str, float] | None:

@@ -106,13 +106,15 @@ def test_las_1_0(tmp_path):
     assert cloud.intensity.tolist() == [100, 101, 102, 103, 104]
 
 
-def pointwise_laz(chunked: bytes) -> bytes:
+def pointwise_laz(chunked: bytes, chunk_size: int = 50_000) -> bytes:
     """A LAZ file of LASzip's first, pointwise compressor, from a one-chunk LAZ file.
 
     In both layouts a chunk is the first point raw and then the arithmetic-coded rest; the
     pointwise file is that stream alone, right at the point-data offset, where the chunked
     file puts the 8-byte offset of its chunk table before the points and the table after
-    them. The LASzip VLR's first field (after its 54-byte VLR header) is the compressor code.
+    them. The LASzip VLR (after its 54-byte VLR header) starts with the compressor code;
+    its chunk-size field (byte 12) means nothing to a pointwise file: the first LASzip
+    releases left it 0, later ones 50000.
     """
     header = laspy.LasHeader.read_from(io.BytesIO(chunked))
     start = header.offset_to_point_data
@@ -121,6 +123,7 @@ def pointwise_laz(chunked: bytes) -> bytes:
     laszip_record = chunked.index(b"laszip encoded") - 2 + 54
     assert struct.unpack_from("<H", data, laszip_record) == (2,)  # pointwise chunked
     struct.pack_into("<H", data, laszip_record, 1)
+    struct.pack_into("<I", data, laszip_record + 12, chunk_size)
     return bytes(data)
 
 
@@ -133,9 +136,11 @@ def as_version_1_0_or_1_1(data: bytes, minor: int) -> bytes:
     return bytes(data)
 
 
-@pytest.mark.parametrize("version,point_format", [("1.0", 1), ("1.1", 0), ("1.2", 0),
-                                                  ("1.2", 1), ("1.2", 2), ("1.2", 3)])
-def test_pointwise_laz_reads_the_points_of_its_las(tmp_path, version, point_format):
+@pytest.mark.parametrize("version,point_format,chunk_size", [
+    ("1.0", 1, 0), ("1.1", 0, 0), ("1.2", 0, 50_000), ("1.2", 1, 0), ("1.2", 2, 50_000),
+    ("1.2", 3, 50_000)])
+def test_pointwise_laz_reads_the_points_of_its_las(tmp_path, version, point_format,
+                                                   chunk_size):
     las = laspy.LasData(laspy.LasHeader(point_format=point_format, version="1.2"))
     las.header.scales, las.header.offsets = [0.01] * 3, [500000.0, 4500000.0, 0.0]
     rng = np.random.default_rng(point_format)
@@ -146,7 +151,7 @@ def test_pointwise_laz_reads_the_points_of_its_las(tmp_path, version, point_form
     las.classification = rng.integers(1, 3, 3000)
     las.write(tmp_path / "source.las")
     las.write(tmp_path / "chunked.laz")
-    data = pointwise_laz((tmp_path / "chunked.laz").read_bytes())
+    data = pointwise_laz((tmp_path / "chunked.laz").read_bytes(), chunk_size)
     if version != "1.2":
         data = as_version_1_0_or_1_1(data, int(version[-1]))
     path = tmp_path / "pointwise.laz"
