@@ -134,7 +134,9 @@ def write_geopackage(path, layers: dict[str, gpd.GeoDataFrame], *,
             # geopandas' Fiona writer warns that an empty frame may fail: it is intended here
             warnings.filterwarnings("ignore", "You are attempting to write an empty DataFrame")
             for name, frame in layers.items():
-                frame.to_file(tmp, layer=name, driver="GPKG")
+                # GeoPackage 1.2, as Debian's GDAL 3.6 (QGIS 3.22) writes: newer GDALs write
+                # 1.4, which it opens with a warning per layer
+                frame.to_file(tmp, layer=name, driver="GPKG", VERSION="1.2")
         empty_types = {n: kind for n, frame in layers.items() if len(frame) == 0
                        and (kind := declared_geometry_type(n, styles_dir)) is not None}
         if empty_types:

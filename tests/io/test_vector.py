@@ -29,7 +29,9 @@ def test_multi_layer_geopackage_with_styles(tmp_path):
     rows = con.execute("SELECT f_table_name, f_geometry_column, useAsDefault, styleQML "
                        "FROM layer_styles").fetchall()
     times = [t for (t,) in con.execute("SELECT update_time FROM layer_styles")]
+    (version,) = con.execute("PRAGMA user_version").fetchone()
     con.close()
+    assert version == 10200  # GeoPackage 1.2 in both environments (QGIS 3.22's GDAL)
     # GeoPackage datetimes are ISO 8601 with a Z (GDAL warns about SQLite's default format)
     assert all(re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z", t) for t in times)
     assert {r[0] for r in rows} == {"road_centrelines", "road_polygons", "junctions"}
