@@ -2,6 +2,7 @@
 import json
 import re
 from pathlib import Path
+from xml.etree import ElementTree
 
 import geopandas as gpd
 import numpy as np
@@ -16,9 +17,9 @@ MODEL_DIR = ALGORITHM_DIR.parent / "models"
 # every NAME = "..." declared by a module of processing_provider/algorithms, and the name of
 # every Processing model shipped in processing_provider/models
 ALGORITHMS = sorted(re.findall(r'^    NAME = "(\w+)"', "".join(
-    p.read_text() for p in ALGORITHM_DIR.glob("*.py")), flags=re.M) + re.findall(
-    r'name="model_name" value="([^"]+)"', "".join(
-        p.read_text() for p in MODEL_DIR.glob("*.model3"))))
+    p.read_text() for p in ALGORITHM_DIR.glob("*.py")), flags=re.M) + [
+    ElementTree.parse(p).find(".//Option[@name='model_name']").get("value")
+    for p in MODEL_DIR.glob("*.model3")])
 
 
 def test_provider_lists_every_algorithm(qgis_process):

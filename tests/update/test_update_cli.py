@@ -10,6 +10,7 @@ from gisroads.cli import main
 from gisroads.io.vector import list_layers, write_geopackage
 from gisroads.synthetic import make_scene
 from gisroads.update import LAYERS, edit_database, read_database, score_changes
+from tests.postgis_cluster import throwaway_cluster
 
 
 @pytest.fixture(scope="module")
@@ -62,6 +63,22 @@ def test_feature_ids_are_the_default_ids(files):
     assert (kept["db_id"] == 3 * kept["ref"]).all()
     moved = gpd.read_file(out, layer="moved")
     assert len(moved) > 0 and (moved["db_id"] == 3 * moved["ref"]).all()
+
+
+def test_postgis_database_by_connection_string(files, tmp_path):
+    """A ``PG:`` source: read by Fiona with the system GDAL, or (pyogrio's wheel has no
+    PostgreSQL driver) copied by ogr2ogr; the table's key is the feature id either way."""
+    folder, _ = files
+    out = tmp_path / "changes.gpkg"
+    with throwaway_cluster() as cluster:
+        cluster.load(folder / "roads.gpkg", "roads", "roads")
+        assert main(["update", str(folder / "extracted.gpkg"), cluster.gdal(), "--layer",
+                     "roads", "--width-field", "width_m", "-o", str(out)]) == 0
+    update = gpd.read_file(out, layer="proposed_update")
+    assert update.crs.to_epsg() == 3857
+    kept = update[update["change"] != "new"]
+    assert len(kept) > 50 and (kept["db_id"] == 3 * kept["ref"]).all()
+    assert set(update["change"]) == {"unchanged", "moved", "width", "missing", "new"}
 
 
 def test_bad_database_is_one_error_line(files, tmp_path, capsys):
