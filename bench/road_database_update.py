@@ -1,0 +1,105 @@
+"""Measure the road database update (gisroads.update) against databases with known changes.
+
+A truth is edited into a "database" (gisroads.update.edit_database: 20 % of the lines
+deleted, 10 % fake lines added, 10 % shifted 5-10 m sideways, 10 % re-widened by 3-6 m), for
+several seeds, and the change layers of gisroads.update.conflate are scored per class
+(score_changes), pooled over the seeds:
+
+* ``synthetic_truth``: a synthetic scene's truth as the extraction (the method's ceiling);
+* ``synthetic_lidar``: the LiDAR pipeline's output on the scene's simulated cloud;
+* ``fusa``: the LiDAR pipeline's output on fusa.laz against its hand-digitised centre lines
+  (``--fusa-roads`` reuses a finished ``gisroads lidar`` GeoPackage).
+
+Class ``new`` is the deleted roads found again, ``missing`` the fake roads flagged missing.
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/road_database_update.py [--out DIR]
+
+Not wired into bench/run.py.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import geopandas as gpd
+
+from gisroads.io.vector import read_layer
+from gisroads.synthetic import make_scene, write_cloud
+from gisroads.update import conflate, edit_database, score_changes
+
+LIDAR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lidar"
+FUSA_TRUTH = LIDAR / "ground_truth" / "fusa" / "centrelines.geojson"
+CLASSES = ("missing", "moved", "width", "new")
+
+
+def pooled_scores(extracted: gpd.GeoDataFrame, truth: gpd.GeoDataFrame, seeds,
+                  **edit_options) -> dict:
+    """Per class: precision and recall pooled over the seeds' edits (flagged-weighted and
+    actual-weighted means), with the pooled counts."""
+    totals = {name: {"right": 0.0, "flagged": 0, "found": 0.0, "actual": 0} for name in CLASSES}
+    for seed in seeds:
+        edited = edit_database(truth, seed=seed, **edit_options)
+        changes = conflate(extracted, edited.database, id_field="db_id",
+                           width_field="width_m")
+        for name, score in score_changes(changes, edited).items():
+            total = totals[name]
+            total["flagged"] += score["flagged"]
+            total["actual"] += score["actual"]
+            total["right"] += score["precision"] * score["flagged"] if score["flagged"] else 0
+            total["found"] += score["recall"] * score["actual"] if score["actual"] else 0
+    return {name: {"precision": t["right"] / t["flagged"] if t["flagged"] else None,
+                   "recall": t["found"] / t["actual"] if t["actual"] else None,
+                   "flagged": t["flagged"], "actual": t["actual"]}
+            for name, t in totals.items()}
+
+
+def scene_edges(scene) -> gpd.GeoDataFrame:
+    """Junction-to-junction truth lines with their road's width."""
+    return scene.truth_edges.merge(scene.truth.centrelines[["road_id", "width_m"]],
+                                   on="road_id")
+
+
+def lidar_roads(cloud: Path, out: Path) -> gpd.GeoDataFrame:
+    """The LiDAR pipeline's centre lines of ``cloud`` (written to ``out``)."""
+    from gisroads.jobs import lidar_job
+    lidar_job(cloud, out)
+    return read_layer(out)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, default=Path("out/bench/road_database_update"))
+    parser.add_argument("--seeds", type=int, default=10, help="edits per case (default 10)")
+    parser.add_argument("--fusa-roads", type=Path,
+                        help="a finished 'gisroads lidar fusa.laz' GeoPackage to reuse")
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    seeds = range(args.seeds)
+    results = {}
+
+    scene = make_scene(seed=0, size_m=(1000.0, 700.0))
+    start = time.perf_counter()
+    results["synthetic_truth"] = pooled_scores(scene.truth.centrelines, scene_edges(scene),
+                                               seeds)
+    results["synthetic_truth"]["seconds_per_edit"] = (time.perf_counter() - start) / len(seeds)
+
+    small = make_scene(seed=1, size_m=(500.0, 500.0))
+    write_cloud(small, args.out / "synthetic.laz", density_per_m2=4.0)
+    extracted = lidar_roads(args.out / "synthetic.laz", args.out / "synthetic_roads.gpkg")
+    results["synthetic_lidar"] = pooled_scores(extracted, scene_edges(small), seeds)
+
+    fusa = (read_layer(args.fusa_roads) if args.fusa_roads
+            else lidar_roads(LIDAR / "fusa.laz", args.out / "fusa_roads.gpkg"))
+    truth = gpd.read_file(FUSA_TRUTH)
+    # a 250 m tile: fake roads 20-40 m long, 15 m clear of the digitised roads
+    results["fusa"] = pooled_scores(fusa, truth, seeds, fake_length_m=(20.0, 40.0),
+                                    fake_clearance_m=15.0)
+
+    (args.out / "results.json").write_text(json.dumps(results, indent=2))
+    print(json.dumps(results, indent=2))
+
+
+if __name__ == "__main__":
+    main()
