@@ -118,8 +118,8 @@ def _metres(text: str) -> tuple[float, ...]:
 
 def cmd_lidar(args) -> int:
     from .jobs import lidar_job
-    options = dict(cell_m=args.cell, tile_m=args.tile, overlap_m=args.overlap,
-                   n_segments=args.segments)
+    options = dict(cue=args.cue, cell_m=args.cell, tile_m=args.tile, overlap_m=args.overlap,
+                   n_segments=args.segments, threshold=args.threshold)
     if args.widths:
         options["widths_m"] = args.widths
     if args.lengths:
@@ -297,6 +297,14 @@ def build_parser() -> argparse.ArgumentParser:
             "Writes road centre lines with widths, road polygons, junctions and the QA "
             "layers rectangles and hypotheses to a GeoPackage in the cloud's CRS.")
     add_source_and_out(p, "input", "LAS/LAZ point cloud with intensity")
+    p.add_argument("--cue", choices=("intensity", "evidence"), default="intensity",
+                   help="intensity: the paper's rectangles on the ground intensity "
+                        "(default); evidence: the road likelihood of every cue the cloud "
+                        "carries (intensity, height above the terrain, density, roughness, "
+                        "slope, returns, classification) through the network stage")
+    p.add_argument("--threshold", type=float, default=0.8,
+                   help="with --cue evidence: road likelihood at which a cell is road "
+                        "(0-1, default 0.8)")
     p.add_argument("--cell", type=_positive,
                    help="intensity image cell in metres (default: 0.5, or the mean point "
                         "spacing of a sparser cloud)")
@@ -312,7 +320,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tagged-las", type=Path,
                    help="also write the cloud with road points classified 11")
     p.add_argument("--rasters", type=Path,
-                   help="also write intensity, likelihood and ground-height GeoTIFFs here")
+                   help="also write intensity, likelihood and ground-height GeoTIFFs here "
+                        "(with --cue evidence: road_evidence.tif)")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
 
     p = add("blocks", cmd_blocks, "segment city blocks on a road-likelihood raster",

@@ -14,7 +14,7 @@ import shapely
 from .errors import NoRoadFoundWarning
 from .evaluate import evaluate_network, match_layers
 from .geo import CENTRELINES, POLYGONS, GeoRaster, RoadNetwork
-from .io.las import cloud_crs, las_info
+from .io.las import cloud_crs, las_info, read_las
 from .io.quicklook import write_quicklook
 from .io.raster import raster_info, read_raster, write_geotiff
 from .io.vector import list_layers, read_layer, write_geopackage
@@ -159,12 +159,13 @@ def evaluate_job(extracted, reference, *, buffer_m: float = 3.0, cell_m: float =
 
 def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
               quicklook=None, progress: Progress = None, **options) -> dict:
-    """Zhu & Mordohai's road extraction of a LAS/LAZ file into a road-network GeoPackage.
+    """The road network of a LAS/LAZ file into a road-network GeoPackage.
 
-    Writes ``out_path`` (road_centrelines, road_polygons, junctions, and the QA layers
-    rectangles and hypotheses) in the cloud's CRS; optionally ``tagged_las`` (the cloud with
-    road points in class 11), ``rasters_dir`` (per-level intensity and likelihood GeoTIFFs
-    of every tile, and the per-level ground heights) and a ``quicklook`` PNG.
+    Writes ``out_path`` (road_centrelines, road_polygons, junctions, and the QA layers of
+    the cue: rectangles and hypotheses, or gap_edges, junction_connections and rejected)
+    in the cloud's CRS; optionally ``tagged_las`` (the cloud with road points in class 11),
+    ``rasters_dir`` (per-level intensity and likelihood GeoTIFFs of every tile and the
+    per-level ground heights, or ``road_evidence.tif``) and a ``quicklook`` PNG.
     ``options`` go to :func:`gisroads.lidar.pipeline.extract_roads`. A cloud without roads
     gives empty layers and a :class:`~gisroads.errors.NoRoadFoundWarning`.
 
@@ -174,7 +175,7 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
         Output paths and counts.
     """
     from .lidar.pipeline import DEFAULT_WIDTHS_M, extract_roads, mosaic_cores
-    from .lidar.tagging import tag_road_points
+    from .lidar.tagging import ground_level_heights, tag_road_points
 
     roads = extract_roads(cloud_path, progress=scaled(progress, 0.0, 0.85), **options)
     network = roads.network
@@ -183,7 +184,10 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
     working, _ = cloud_crs(cloud_path)
     result = {"gpkg": Path(out_path), "roads": len(network.centrelines),
               "length_m": float(network.centrelines.length_m.sum()),
-              "junctions": len(network.junctions), "tiles": len(roads.tiles)}
+              "junctions": len(network.junctions), "tiles": len(roads.tiles),
+              "cue": options.get("cue", "intensity")}
+    if roads.cues:
+        result["cues"] = ",".join(roads.cues)
     # tiles with a ground level to image (a tile of a few metres may have none)
     imaged = [t for t in roads.tiles if len(t.intensity.data)]
     if rasters_dir is not None:
@@ -201,12 +205,17 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
         if imaged:
             write_geotiff(rasters / "ground_heights.tif", roads.heights, band_names=[
                 f"level_{k}" for k in range(roads.heights.data.shape[0])])
+        if roads.evidence is not None:
+            write_geotiff(rasters / "road_evidence.tif", roads.evidence,
+                          band_names=["road_likelihood"])
         result["rasters"] = rasters
     if tagged_las is not None:
         report(progress, 0.9, "tagging road points")
+        # the evidence cue images one surface: its heights come from the cloud's planes
+        heights = (roads.heights if roads.heights is not None
+                   else ground_level_heights(read_las(cloud_path)))
         result["tagged_points"] = tag_road_points(cloud_path, tagged_las,
-                                                  network.polygons.to_crs(working),
-                                                  roads.heights)
+                                                  network.polygons.to_crs(working), heights)
         result["tagged_las"] = Path(tagged_las)
     if quicklook is not None:
         report(progress, 0.97, "drawing the quick-look")
@@ -215,15 +224,22 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
             intensity = mosaic_cores([(t.tile, t.intensity) for t in imaged],
                                      imaged[0].intensity.pixel_size)
             background = GeoRaster(intensity.data[0], intensity.transform, working)
+        elif roads.evidence is not None:
+            background = roads.evidence
+        # the QA layer of the cue: the selected rectangles, or the bridged gaps
+        qa = (network.qa["rectangles"] if "rectangles" in network.qa
+              else network.qa["gap_edges"].query("selected"))
         write_quicklook(quicklook, [
-            (network.qa["rectangles"].to_crs(working),
-             dict(facecolor="none", edgecolor="cyan", linewidth=0.6)),
+            (qa.to_crs(working), dict(facecolor="none", edgecolor="cyan", linewidth=0.6)
+             if "rectangles" in network.qa else dict(color="cyan", linewidth=2)),
             (network.centrelines.to_crs(working),
              dict(color="red", linewidth=1.5, label="road centre lines")),
             (network.junctions.to_crs(working),
              dict(color="yellow", markersize=20, label="junctions")),
         ], background=background,
-            title=f"{Path(cloud_path).name}: roads over the ground intensity (level 0)")
+            title=f"{Path(cloud_path).name}: roads over the "
+                  + ("road evidence" if roads.evidence is not None
+                     else "ground intensity (level 0)"))
         result["quicklook"] = Path(quicklook)
     report(progress, 1.0, "done")
     return result
@@ -256,7 +272,6 @@ def ground_intensity_job(cloud_path, intensity_path, *, heights_path=None, cell_
     grid is the one :func:`gisroads.lidar.pipeline.extract_tile` uses over the same bounds.
     The whole cloud is held in memory: for large files run the tiled pipeline.
     """
-    from .io.las import read_las
     from .lidar.ground import ground_planes
     from .lidar.intensity import write_intensity_images
     from .lidar.pipeline import auto_cell_m, ground_and_intensity
@@ -279,6 +294,24 @@ def ground_intensity_job(cloud_path, intensity_path, *, heights_path=None, cell_
     return {"intensity": intensity, "level_index": index, "ground_heights": heights_path,
             "levels": planes.n_levels, "cell_m": cell_m,
             "ground_points": int((planes.level >= 0).sum()), "points": len(cloud)}
+
+
+def evidence_job(cloud_path, out_path, *, cell_m: float | None = None,
+                 tile_m: float = 300.0, overlap_m: float = 100.0,
+                 progress: Progress = None) -> dict:
+    """The road-evidence raster of a LAS/LAZ file (the ``evidence`` cue of ``gisroads
+    lidar``) as a one-band GeoTIFF of road likelihood in [0, 1] (NaN outside the data), in
+    the cloud's metre working CRS; see :func:`gisroads.lidar.pipeline.evidence_raster`."""
+    from .lidar.pipeline import evidence_raster
+
+    likelihood, used, missing = evidence_raster(cloud_path, cell_m=cell_m, tile_m=tile_m,
+                                                overlap_m=overlap_m, progress=progress)
+    if likelihood is None:
+        raise ValueError(f"{cloud_path}: no tile holds enough points to image")
+    write_geotiff(out_path, likelihood, band_names=["road_likelihood"])
+    return {"raster": Path(out_path), "cell_m": likelihood.pixel_size,
+            "cues": ",".join(used),
+            "missing": "; ".join(f"{k}: {v}" for k, v in missing.items())}
 
 
 def lidar_segmentation_job(intensity_path, segments_path, *, level: int = 0,
@@ -399,7 +432,6 @@ def tag_job(cloud_path, polygons_path, out_path, *, heights_path=None,
     cloud's. Without polygons the cloud is copied with no point tagged, with a
     :class:`~gisroads.errors.NoRoadFoundWarning`.
     """
-    from .io.las import cloud_crs, read_las
     from .lidar.tagging import ground_level_heights, tag_road_points
 
     working, _ = cloud_crs(cloud_path)

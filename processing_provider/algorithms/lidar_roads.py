@@ -1,11 +1,11 @@
 """LiDAR road network (Zhu & Mordohai): the whole pipeline from a LAS/LAZ file."""
-from qgis.core import (QgsProcessingParameterFileDestination,
+from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterFolderDestination, QgsProcessingParameterNumber,
                        QgsProcessingParameterString)
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import lidar_job, parse_metres
-from gisroads.lidar.pipeline import DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M
+from gisroads.lidar.pipeline import CUES, DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, EVIDENCE_THRESHOLD
 
 from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
 from .base import GisroadsAlgorithm, cloud_input, network_output
@@ -25,7 +25,12 @@ class LidarRoadNetwork(GisroadsAlgorithm):
         "<p>The cloud is processed in overlapping tiles; roads are joined across tile "
         "seams. Output: a GeoPackage in the cloud's CRS with road_centrelines (width_m), "
         "road_polygons, junctions and the QA layers rectangles (selected) and hypotheses "
-        "(all valid windows).</p>")
+        "(all valid windows).</p>"
+        "<p>With the <i>evidence</i> cue (beyond the paper) the road likelihood of every cue "
+        "the cloud carries (Road evidence raster) goes through the network stage (Road "
+        "raster to network) instead: gaps are bridged, junctions built and curved roads "
+        "followed; the QA layers are then gap_edges, junction_connections and rejected, and "
+        "the raster folder receives road_evidence.tif.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         double = QgsProcessingParameterNumber.Double
@@ -34,6 +39,13 @@ class LidarRoadNetwork(GisroadsAlgorithm):
         params = [
             (cloud_input(self.tr, "airborne LiDAR with intensity; feet are converted to "
                                   "metres"), None),
+            (QgsProcessingParameterEnum("CUE", self.tr("Road cue"), list(CUES),
+                                        defaultValue=0),
+             "intensity: the paper's rectangles on the ground intensity; evidence: the road "
+             "likelihood of every cue the cloud carries, through the network stage"),
+            (QgsProcessingParameterNumber("THRESHOLD", self.tr("Evidence threshold"), double,
+                                          EVIDENCE_THRESHOLD, minValue=0.0, maxValue=1.0),
+             "evidence cue only: road likelihood at which a cell is road"),
             (QgsProcessingParameterNumber("CELL", self.tr("Intensity image cell (metres)"),
                                           double, None, optional=True, minValue=0.1,
                                           maxValue=5.0),
@@ -74,6 +86,8 @@ class LidarRoadNetwork(GisroadsAlgorithm):
             result = lidar_job(
                 self.parameterAsFile(parameters, "INPUT", context), out, tagged_las=tagged,
                 rasters_dir=rasters, progress=progress_callback(feedback),
+                cue=CUES[self.parameterAsEnum(parameters, "CUE", context)],
+                threshold=self.parameterAsDouble(parameters, "THRESHOLD", context),
                 cell_m=(self.parameterAsDouble(parameters, "CELL", context)
                         if parameters.get("CELL") not in (None, "") else None),
                 widths_m=parse_metres(self.parameterAsString(parameters, "WIDTHS", context),
@@ -83,7 +97,9 @@ class LidarRoadNetwork(GisroadsAlgorithm):
                 tile_m=self.parameterAsDouble(parameters, "TILE", context),
                 overlap_m=self.parameterAsDouble(parameters, "OVERLAP", context),
                 n_segments=self.parameterAsInt(parameters, "SEGMENTS", context))
-        load_geopackage_on_completion(context, out, ("hypotheses", "rectangles", POLYGONS,
-                                                     CENTRELINES, JUNCTIONS), group="roads")
+        qa = (("hypotheses", "rectangles") if result["cue"] == "intensity"
+              else ("rejected", "gap_edges", "junction_connections"))
+        load_geopackage_on_completion(context, out, (*qa, POLYGONS, CENTRELINES, JUNCTIONS),
+                                      group="roads")
         return {"OUTPUT": out, "TAGGED_LAS": tagged, "RASTERS": rasters,
                 **self.network_outputs(result, feedback)}
