@@ -27,32 +27,10 @@ import geopandas as gpd
 
 from gisroads.io.vector import read_layer
 from gisroads.synthetic import make_scene, write_cloud
-from gisroads.update import conflate, edit_database, score_changes
+from gisroads.update import pooled_scores
 
 LIDAR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lidar"
 FUSA_TRUTH = LIDAR / "ground_truth" / "fusa" / "centrelines.geojson"
-CLASSES = ("missing", "moved", "width", "new")
-
-
-def pooled_scores(extracted: gpd.GeoDataFrame, truth: gpd.GeoDataFrame, seeds,
-                  **edit_options) -> dict:
-    """Per class: precision and recall pooled over the seeds' edits (flagged-weighted and
-    actual-weighted means), with the pooled counts."""
-    totals = {name: {"right": 0.0, "flagged": 0, "found": 0.0, "actual": 0} for name in CLASSES}
-    for seed in seeds:
-        edited = edit_database(truth, seed=seed, **edit_options)
-        changes = conflate(extracted, edited.database, id_field="db_id",
-                           width_field="width_m")
-        for name, score in score_changes(changes, edited).items():
-            total = totals[name]
-            total["flagged"] += score["flagged"]
-            total["actual"] += score["actual"]
-            total["right"] += score["precision"] * score["flagged"] if score["flagged"] else 0
-            total["found"] += score["recall"] * score["actual"] if score["actual"] else 0
-    return {name: {"precision": t["right"] / t["flagged"] if t["flagged"] else None,
-                   "recall": t["found"] / t["actual"] if t["actual"] else None,
-                   "flagged": t["flagged"], "actual": t["actual"]}
-            for name, t in totals.items()}
 
 
 def scene_edges(scene) -> gpd.GeoDataFrame:

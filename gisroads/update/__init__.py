@@ -3,11 +3,12 @@
 :func:`conflate` matches extracted centre lines to a database's lines and returns the change
 layers (``confirmed``, ``missing``, ``new``, ``moved``, ``proposed_update``);
 :func:`read_database` reads a database from any OGR source with its feature ids;
-:func:`edit_database` and :func:`score_changes` make and score a benchmark with known changes.
+:func:`edit_database`, :func:`score_changes` and :func:`pooled_scores` make and score a
+benchmark with known changes.
 """
-from .benchmark import EditedDatabase, edit_database, score_changes
+from .benchmark import EditedDatabase, edit_database, pooled_scores, score_changes
 from .conflate import CHANGES, LAYERS, conflate
 from .sources import read_database
 
 __all__ = ["CHANGES", "LAYERS", "EditedDatabase", "conflate", "edit_database",
-           "read_database", "score_changes"]
+           "pooled_scores", "read_database", "score_changes"]

@@ -4,7 +4,7 @@ changes, and the precision and recall of each change class found by :func:`confl
 :func:`edit_database` deletes roads (the comparison should report them ``new``), adds fake
 roads (``missing``), shifts roads sideways (``moved``) and changes widths (``width``), each on
 a disjoint random share of the truth's lines, seeded. :func:`score_changes` scores the change
-layers against that edit.
+layers against that edit; :func:`pooled_scores` does both over several seeded edits.
 """
 from __future__ import annotations
 
@@ -15,8 +15,12 @@ import numpy as np
 import pandas as pd
 import shapely
 
+from .conflate import conflate
+
 EDITS = ("unchanged", "shifted", "width", "fake")
 """Values of :attr:`EditedDatabase.edit`."""
+CLASSES = ("missing", "moved", "width", "new")
+"""The change classes :func:`score_changes` scores."""
 
 
 @dataclass
@@ -214,3 +218,43 @@ def score_changes(changes: dict[str, gpd.GeoDataFrame], edited: EditedDatabase, 
     found = int((_covered_share(deleted, new, buffer_m) >= min_cover).sum())
     scores["new"] = _precision_recall(len(new), right, len(deleted), found)
     return scores
+
+
+def pooled_scores(extracted: gpd.GeoDataFrame, truth: gpd.GeoDataFrame, seeds, *,
+                  width_field: str = "width_m", **edit_options) -> dict:
+    """Edit ``truth`` once per seed, compare ``extracted`` with each edit and pool the scores.
+
+    Parameters
+    ----------
+    extracted : GeoDataFrame
+        Extracted centre lines (any CRS).
+    truth : GeoDataFrame
+        Truth centre lines in a metre CRS with widths in ``width_field`` (metres).
+    seeds : iterable of int
+    width_field : str
+    **edit_options
+        Passed to :func:`edit_database`.
+
+    Returns
+    -------
+    dict
+        Per class of :func:`score_changes`: precision and recall pooled over the edits
+        (means weighted by the flagged and the actual counts; None without any), and the
+        pooled counts.
+    """
+    totals = {name: {"right": 0.0, "flagged": 0, "found": 0.0, "actual": 0}
+              for name in CLASSES}
+    for seed in seeds:
+        edited = edit_database(truth, seed=seed, width_field=width_field, **edit_options)
+        changes = conflate(extracted, edited.database, id_field="db_id",
+                           width_field=width_field)
+        for name, score in score_changes(changes, edited).items():
+            total = totals[name]
+            total["flagged"] += score["flagged"]
+            total["actual"] += score["actual"]
+            total["right"] += score["precision"] * score["flagged"] if score["flagged"] else 0
+            total["found"] += score["recall"] * score["actual"] if score["actual"] else 0
+    return {name: {"precision": t["right"] / t["flagged"] if t["flagged"] else None,
+                   "recall": t["found"] / t["actual"] if t["actual"] else None,
+                   "flagged": t["flagged"], "actual": t["actual"]}
+            for name, t in totals.items()}
