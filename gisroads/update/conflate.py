@@ -111,9 +111,8 @@ def _sample(lines: np.ndarray, step_m: float) -> _Samples:
 class _Nearest:
     """Per sample, the nearest compatible line of the other side (``line`` -1: none within
     reach), the chainage of the nearest point on it (m), that point's ``xy`` (NaN where
-    none), the distance (m) and
-    whether that point is an end of the line (the sample lies beyond the line's end), and
-    the distance (m) to the closest compatible line, chosen or not."""
+    none), the distance to it (m), whether it is an end of the line (the sample lies beyond
+    the line's end), and the distance (m) to the closest compatible line, chosen or not."""
 
     line: np.ndarray
     chainage: np.ndarray
@@ -195,13 +194,14 @@ def _runs(flag: np.ndarray, line: np.ndarray, xy: np.ndarray) -> _Runs:
     return _Runs(run, first, size, lines)
 
 
-def _working_crs(extracted: gpd.GeoDataFrame) -> CRS:
-    """The extraction's CRS when it is projected in metres, else the UTM zone over it."""
+def _working_crs(extracted: gpd.GeoDataFrame, database: gpd.GeoDataFrame) -> CRS:
+    """The extraction's CRS when it is projected in metres, else the UTM zone over the
+    extraction (over the database when the extraction is empty)."""
     crs = CRS.from_user_input(extracted.crs)
     unit = crs.axis_info[0].unit_name if crs.is_projected else ""
     if unit in ("metre", "meter"):
         return crs
-    return CRS.from_user_input(extracted.estimate_utm_crs())
+    return CRS.from_user_input((extracted if len(extracted) else database).estimate_utm_crs())
 
 
 def _line_parts(frame: gpd.GeoDataFrame, crs: CRS) -> tuple[np.ndarray, np.ndarray]:
@@ -241,7 +241,7 @@ def _observable(xy: np.ndarray, crs: CRS, coverage) -> np.ndarray:
     return shapely.contains_xy(area, xy[:, 0], xy[:, 1]).astype(float)
 
 
-def _feature_table(database: gpd.GeoDataFrame, id_field: str | None) -> pd.Series:
+def _feature_ids(database: gpd.GeoDataFrame, id_field: str | None) -> pd.Series:
     """The database's feature ids: column ``id_field``, else its index (OGR's FIDs when read
     with :func:`gisroads.update.read_database`)."""
     if id_field is None:
@@ -393,11 +393,11 @@ def conflate(extracted: gpd.GeoDataFrame, database: gpd.GeoDataFrame, *,
     if not tolerance_m < search_m:
         raise ValueError(f"the tolerance ({tolerance_m} m) must be below the search distance "
                          f"({search_m} m)")
-    ids = _feature_table(database, id_field)
+    ids = _feature_ids(database, id_field)
     if width_field is not None and width_field not in database.columns:
         raise ValueError(f"the database has no width field {width_field!r}")
     report(progress, 0.0, "sampling")
-    crs, db_crs = _working_crs(extracted), CRS.from_user_input(database.crs)
+    crs, db_crs = _working_crs(extracted, database), CRS.from_user_input(database.crs)
     db_lines, db_row = _line_parts(database, crs)
     if len(db_lines) == 0:
         raise ValueError("the database holds no line geometry")
@@ -436,8 +436,9 @@ def conflate(extracted: gpd.GeoDataFrame, database: gpd.GeoDataFrame, *,
         range(n_rows))
     ext_width = (extracted["width_m"].to_numpy(float) if "width_m" in extracted
                  else np.full(len(extracted), np.nan))
-    measured = pd.Series(np.where(matched, ext_width[ext_row[np.maximum(db_near.line, 0)]],
-                                  np.nan)).groupby(db_feature).mean().reindex(
+    sample_width = np.full(len(matched), np.nan)
+    sample_width[matched] = ext_width[ext_row[db_near.line[matched]]]
+    measured = pd.Series(sample_width).groupby(db_feature).mean().reindex(
         range(n_rows)).to_numpy()
     db_width = (pd.to_numeric(database[width_field], errors="coerce").to_numpy(float)
                 if width_field else np.full(n_rows, np.nan))

@@ -158,6 +158,24 @@ def test_unseen_road_is_missing_and_index_gives_the_ids(street):
     assert changes["new"][["start_db_id", "end_db_id"]].isna().all().all()
 
 
+def test_an_extraction_without_roads_leaves_every_road_missing(street):
+    extracted, database = street
+    for crs in (extracted.crs, "EPSG:4326"):  # metres, or degrees: matched in UTM
+        changes = conflate(extracted.iloc[:0].to_crs(crs), database)
+        assert changes["proposed_update"]["change"].tolist() == ["missing"]
+        assert changes["missing"]["length_m"].tolist() == pytest.approx([300.0], abs=0.5)
+        assert changes["new"].empty and changes["confirmed"].empty
+
+
+def test_an_extraction_in_degrees_is_matched_in_metres(street):
+    extracted, database = street
+    changes = conflate(extracted.to_crs("EPSG:4326"), database, width_field="lanes")
+    confirmed = changes["confirmed"]
+    assert confirmed["db_id"].tolist() == [41] and confirmed.crs == database.crs
+    assert confirmed["max_offset_m"].iloc[0] < 0.05
+    assert confirmed["width_diff_m"].iloc[0] == pytest.approx(6.0)  # 8 m measured, "2"
+
+
 def test_a_crossing_road_is_no_match(street):
     extracted, database = street
     crossing = extracted.copy()
