@@ -75,8 +75,9 @@ def _missing_requirement() -> str | None:
 
 
 def _free_port() -> int:
-    """A TCP port number no local server uses; the socket file's name carries it, and
-    PostgreSQL refuses a port another cluster's socket lock holds."""
+    """A TCP port number no local server uses. The cluster listens on no TCP port (only its
+    socket file, named after the port, in its own folder); a free number keeps it apart from
+    any other cluster all the same, should one point libpq at the same folder."""
     import socket
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
