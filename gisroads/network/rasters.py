@@ -147,7 +147,8 @@ def road_probability(raster: GeoRaster, *, band: int = 1) -> GeoRaster:
 
 def road_mask(probability: np.ndarray, pixel_m: float, *, threshold: float = THRESHOLD,
               smooth_m: float = SMOOTH_M, max_hole_m2: float = MAX_HOLE_M2,
-              min_area_m2: float = MIN_AREA_M2) -> np.ndarray:
+              min_area_m2: float = MIN_AREA_M2, low_threshold: float | None = None
+              ) -> np.ndarray:
     """Road pixels of a probability raster, cleaned.
 
     Parameters
@@ -163,6 +164,12 @@ def road_mask(probability: np.ndarray, pixel_m: float, *, threshold: float = THR
         smoothing is normalised by the smoothed validity.
     max_hole_m2, min_area_m2 : float
         Holes up to this area are filled; components under it dropped, square metres.
+    low_threshold : float, optional
+        Hysteresis (as Canny's edges): pixels at or above this (and below ``threshold``)
+        are road too when their 8-connected component of such pixels holds a pixel at or
+        above ``threshold``. A road whose probability sags along a stretch (a grey surface,
+        a shadow, sparse points) stays whole, and weak blobs on their own stay out. Off by
+        default (None).
 
     Returns
     -------
@@ -175,6 +182,12 @@ def road_mask(probability: np.ndarray, pixel_m: float, *, threshold: float = THR
         weight = ndimage.gaussian_filter(valid.astype(np.float32), sigma)
         values = ndimage.gaussian_filter(values, sigma) / np.maximum(weight, 1e-6)
     road = (values >= threshold) & valid
+    if low_threshold is not None and low_threshold < threshold:
+        weak, _ = ndimage.label((values >= low_threshold) & valid, structure=np.ones((3, 3)))
+        seeded = np.zeros(weak.max() + 1, bool)
+        seeded[weak[road]] = True
+        seeded[0] = False
+        road = seeded[weak]
     pixel_m2 = pixel_m ** 2
     background, count = ndimage.label(~road)
     touching_border = np.unique(np.concatenate([background[0], background[-1],
@@ -331,16 +344,17 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
                    junction_merge_m: float = JUNCTION_MERGE_M,
                    straighten: float = STRAIGHTEN, simplify_m: float = SIMPLIFY_M,
                    max_width_m: float = MAX_WIDTH_M, tile_px: int = TILE_PX,
-                   overlap_px: int = OVERLAP_PX, progress: Progress = None
-                   ) -> gpd.GeoDataFrame:
+                   overlap_px: int = OVERLAP_PX, low_threshold: float | None = None,
+                   progress: Progress = None) -> gpd.GeoDataFrame:
     """Road parts of a probability raster: clean centre lines split at junctions.
 
     Parameters
     ----------
     probability : GeoRaster
         2-D, 0-1, NaN = no data (see :func:`road_probability`), projected CRS in metres.
-    threshold, smooth_m, max_hole_m2, min_area_m2 : float
-        See :func:`road_mask`.
+    threshold, smooth_m, max_hole_m2, min_area_m2, low_threshold : float
+        See :func:`road_mask` (the hysteresis of ``low_threshold`` connects within a tile
+        and its overlap).
     spur_m : float
         End branches shorter than the half width of the widest road at their junction plus
         this are pruned, metres.
@@ -367,7 +381,7 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
     if tile_px < 64 or overlap_px < 0:
         raise ValueError("tile_px must be at least 64 and overlap_px at least 0")
     mask_options = dict(threshold=threshold, smooth_m=smooth_m, max_hole_m2=max_hole_m2,
-                        min_area_m2=min_area_m2)
+                        min_area_m2=min_area_m2, low_threshold=low_threshold)
     lines, width = _raw_skeleton(probability, tile_px=tile_px, overlap_px=overlap_px,
                                  mask_options=mask_options,
                                  progress=scaled(progress, 0.0, 0.8))

@@ -139,3 +139,22 @@ def test_real_massachusetts_mask_to_its_centre_lines():
     assert metrics.quality >= 0.95
     assert topology_metrics(network.centrelines, record.truth)["junction_recall"] >= 0.9
     assert _spurs(network, 5.0) == 0
+
+
+def test_hysteresis_keeps_a_road_whole_through_a_weak_stretch_and_weak_blobs_out():
+    from gisroads.network.rasters import road_mask
+
+    probability = np.zeros((200, 400), np.float32)
+    probability[90:106, :] = 0.95        # a road, 8 m wide at 0.5 m pixels
+    probability[90:106, 150:250] = 0.65  # 50 m of it on a grey surface
+    probability[20:40, 100:160] = 0.65   # a grey blob on its own
+    plain = road_mask(probability, 0.5, threshold=0.8)
+    assert not plain[98, 150:250].any() and plain[98, :150].all()
+    mask = road_mask(probability, 0.5, threshold=0.8, low_threshold=0.6)
+    assert mask[98, :].all()             # the road is whole
+    assert not mask[20:40, 100:160].any()  # the blob is not seeded
+    # through the network stage: one road across the raster
+    network = raster_to_network(_raster(probability), threshold=0.8,
+                                part_options={"low_threshold": 0.6})
+    assert len(network.centrelines) == 1
+    assert network.centrelines.length_m.iloc[0] > 0.95 * 200
