@@ -65,6 +65,24 @@ def test_feature_ids_are_the_default_ids(files):
     assert len(moved) > 0 and (moved["db_id"] == 3 * moved["ref"]).all()
 
 
+def test_coverage_tells_not_seen_from_not_observable(files, tmp_path):
+    folder, edited = files
+    database = read_database(folder / "roads.shp")
+    fakes = database[database["db_id"].isin(edited.edit.index[edited.edit == "fake"])]
+    # the survey covered the first fake road only
+    coverage = gpd.GeoDataFrame(geometry=[fakes.geometry.iloc[0].buffer(50.0)],
+                                crs=database.crs).to_crs("EPSG:4326")
+    coverage.to_file(tmp_path / "coverage.geojson")
+    out = tmp_path / "changes.gpkg"
+    assert main(["update", str(folder / "extracted.gpkg"), str(folder / "roads.shp"),
+                 "--id-field", "db_id", "--coverage", str(tmp_path / "coverage.geojson"),
+                 "-o", str(out)]) == 0
+    missing = gpd.read_file(out, layer="missing").set_index("db_id")
+    evidence = missing.loc[fakes["db_id"], "evidence"]
+    assert evidence.iloc[0] == "not_seen"
+    assert (evidence.iloc[1:] == "not_observable").all()
+
+
 def test_postgis_database_by_connection_string(files, tmp_path):
     """A ``PG:`` source: read by Fiona with the system GDAL, or (pyogrio's wheel has no
     PostgreSQL driver) copied by ogr2ogr; the table's key is the feature id either way."""
