@@ -6,7 +6,7 @@ from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutpu
                        QgsProcessingParameterRasterLayer, QgsWkbTypes)
 
 from gisroads.io.raster import read_raster
-from gisroads.update import conflate
+from gisroads.update import CHANGES, conflate
 
 from ..convert import (frame_to_sink, gisroads_errors, progress_callback, source_to_frame,
                        style_on_load)
@@ -167,6 +167,5 @@ class CompareWithRoadDatabase(GisroadsAlgorithm):
             outputs[f"{name}_COUNT"] = len(frame)
             style_on_load(context, outputs[name], layer)
         counted = changes["proposed_update"]["change"].value_counts()
-        feedback.pushInfo(", ".join(f"{counted.get(c, 0)} {c}" for c in
-                                    ("unchanged", "moved", "width", "missing", "new")))
+        feedback.pushInfo(", ".join(f"{counted.get(c, 0)} {c}" for c in CHANGES))
         return outputs
