@@ -75,8 +75,8 @@ JUNCTION_MERGE_M = 4.0
 STRAIGHTEN = 1.5
 #: Douglas-Peucker tolerance of the centre lines, metres.
 SIMPLIFY_M = 0.5
-#: Parts wider than this are no road (the widest roads of Zhu & Mordohai's hypotheses).
-MAX_WIDTH_M = 25.0
+#: Parts wider than this are no road: a six-lane arterial with its median is about 35 m.
+MAX_WIDTH_M = 40.0
 #: Isolated lines shorter than this are dropped, metres.
 MIN_LENGTH_M = 10.0
 #: An isolated string shorter than this many times its width is a blob, not a road.
