@@ -166,10 +166,10 @@ def road_mask(probability: np.ndarray, pixel_m: float, *, threshold: float = THR
         Holes up to this area are filled; components under it dropped, square metres.
     low_threshold : float, optional
         Hysteresis (as Canny's edges): pixels at or above this (and below ``threshold``)
-        are road too when their 8-connected component of such pixels holds a pixel at or
-        above ``threshold``. A road whose probability sags along a stretch (a grey surface,
-        a shadow, sparse points) stays whole, and weak blobs on their own stay out. Off by
-        default (None).
+        are road too when their 8-connected component of such pixels holds a component
+        of ``min_area_m2`` or more at or above ``threshold`` (salt noise seeds nothing). A
+        road whose probability sags along a stretch (a grey surface, a shadow, sparse
+        points) stays whole, and weak blobs on their own stay out. Off by default (None).
 
     Returns
     -------
@@ -182,13 +182,16 @@ def road_mask(probability: np.ndarray, pixel_m: float, *, threshold: float = THR
         weight = ndimage.gaussian_filter(valid.astype(np.float32), sigma)
         values = ndimage.gaussian_filter(values, sigma) / np.maximum(weight, 1e-6)
     road = (values >= threshold) & valid
+    pixel_m2 = pixel_m ** 2
     if low_threshold is not None and low_threshold < threshold:
-        weak, _ = ndimage.label((values >= low_threshold) & valid, structure=np.ones((3, 3)))
-        seeded = np.zeros(weak.max() + 1, bool)
-        seeded[weak[road]] = True
+        strong, count = ndimage.label(road, structure=np.ones((3, 3)))
+        seed = np.bincount(strong.ravel(), minlength=count + 1) * pixel_m2 >= min_area_m2
+        seed[0] = False
+        weak, count = ndimage.label((values >= low_threshold) & valid, structure=np.ones((3, 3)))
+        seeded = np.zeros(count + 1, bool)
+        seeded[weak[seed[strong]]] = True
         seeded[0] = False
         road = seeded[weak]
-    pixel_m2 = pixel_m ** 2
     background, count = ndimage.label(~road)
     touching_border = np.unique(np.concatenate([background[0], background[-1],
                                                 background[:, 0], background[:, -1]]))

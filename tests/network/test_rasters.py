@@ -147,7 +147,8 @@ def test_hysteresis_keeps_a_road_whole_through_a_weak_stretch_and_weak_blobs_out
     probability = np.zeros((200, 400), np.float32)
     probability[90:106, :] = 0.95        # a road, 8 m wide at 0.5 m pixels
     probability[90:106, 150:250] = 0.65  # 50 m of it on a grey surface
-    probability[20:40, 100:160] = 0.65   # a grey blob on its own
+    probability[20:40, 100:160] = 0.65   # a grey blob on its own...
+    probability[28:32, 128:132] = 0.95   # ...with 4 m2 of strong pixels: too small to seed
     plain = road_mask(probability, 0.5, threshold=0.8)
     assert not plain[98, 150:250].any() and plain[98, :150].all()
     mask = road_mask(probability, 0.5, threshold=0.8, low_threshold=0.6)
