@@ -172,7 +172,7 @@ def cmd_snakes(args) -> int:
 def cmd_demo(args) -> int:
     from .jobs import demo_job
     result = demo_job(args.out, progress=_ProgressBar(not args.json))
-    image, lidar = result["image"], result["lidar"]
+    image, lidar, evidence = result["image"], result["lidar"], result["lidar_evidence"]
     _print(result, args.json, "\n".join([
         f"imagery (SpaceNet Paris tile): {image['roads']} roads, {image['length_m']:.0f} m, "
         f"{image['junctions']} junctions, cues {image['cues']}",
@@ -180,7 +180,10 @@ def cmd_demo(args) -> int:
         result["image_report"], "",
         f"LiDAR (IGN LiDAR HD tile): {lidar['roads']} roads, {lidar['length_m']:.0f} m, "
         f"{lidar['junctions']} junctions",
-        f"outputs in {args.out}/: image_roads.gpkg/.png, lidar_roads.gpkg/.png"]))
+        f"LiDAR, evidence cue (beyond the paper): {evidence['roads']} roads, "
+        f"{evidence['length_m']:.0f} m, {evidence['junctions']} junctions",
+        f"outputs in {args.out}/: image_roads.gpkg/.png, lidar_roads.gpkg/.png, "
+        "lidar_evidence_roads.gpkg/.png"]))
     return 0
 
 

@@ -704,8 +704,9 @@ def demo_job(out_dir, *, data_dir=DEMO_DATA, progress: Progress = None) -> dict:
       OpenStreetMap centre lines (``image_roads.gpkg``, ``image_roads.png``,
       ``image_evaluation.json``);
     * the LiDAR pipeline on a thinned IGN LiDAR HD tile of a town (1 km², 0.29 points/m²,
-      processed at the coarser cell its density allows) (``lidar_roads.gpkg``,
-      ``lidar_roads.png``).
+      processed at the coarser cell its density allows) with the paper's intensity cue
+      (``lidar_roads.gpkg``, ``lidar_roads.png``) and with the evidence cue
+      (``lidar_evidence_roads.gpkg``, ``lidar_evidence_roads.png``).
     """
     from .evaluate import format_report
 
@@ -719,10 +720,14 @@ def demo_job(out_dir, *, data_dir=DEMO_DATA, progress: Progress = None) -> dict:
                                   read_layer(data / DEMO_IMAGE_TRUTH), valid_area=footprint)
     (out / "image_evaluation.json").write_text(to_json(evaluation))
     lidar = lidar_job(data / DEMO_CLOUD, out / "lidar_roads.gpkg",
-                      quicklook=out / "lidar_roads.png", progress=scaled(progress, 0.3, 1.0))
+                      quicklook=out / "lidar_roads.png", progress=scaled(progress, 0.3, 0.85))
+    evidence = lidar_job(data / DEMO_CLOUD, out / "lidar_evidence_roads.gpkg", cue="evidence",
+                         quicklook=out / "lidar_evidence_roads.png",
+                         progress=scaled(progress, 0.85, 1.0))
     report(progress, 1.0, "done")
     return {"image": image, "image_evaluation": evaluation,
-            "image_report": format_report(evaluation), "lidar": lidar}
+            "image_report": format_report(evaluation), "lidar": lidar,
+            "lidar_evidence": evidence}
 
 
 def vectorize_job(raster_path, out_path, *, band: int = 1, threshold: float = 0.5,

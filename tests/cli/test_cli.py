@@ -146,7 +146,11 @@ def test_demo_runs_both_pipelines_on_the_bundled_data(tmp_path):
     buffer = demo["image_evaluation"]["buffer"]
     assert buffer["completeness"] > 0.18 and buffer["correctness"] > 0.3
     assert demo["lidar"]["roads"] >= 5 and demo["lidar"]["length_m"] > 500
-    for name in ("image_roads", "lidar_roads"):
+    # the evidence cue finds the town's street network: measured 16.4 km, 180 junctions
+    evidence = demo["lidar_evidence"]
+    assert evidence["cue"] == "evidence" and evidence["length_m"] > 10_000
+    assert evidence["junctions"] >= 100
+    for name in ("image_roads", "lidar_roads", "lidar_evidence_roads"):
         assert list_layers(tmp_path / f"{name}.gpkg")[:3] == ["road_centrelines",
                                                               "road_polygons", "junctions"]
         assert (tmp_path / f"{name}.png").stat().st_size > 50_000
