@@ -6,7 +6,8 @@ several seeds, and the change layers of gisroads.update.conflate are scored per 
 (score_changes), pooled over the seeds:
 
 * ``synthetic_truth``: a synthetic scene's truth as the extraction (the method's ceiling);
-* ``synthetic_lidar``: the LiDAR pipeline's output on the scene's simulated cloud;
+* ``synthetic_lidar``: the LiDAR pipeline's output on a scene's simulated cloud;
+* ``synthetic_imagery``: the imagery pipeline's output on the same scene's R,G,B,NIR image;
 * ``fusa``: the LiDAR pipeline's output on fusa.laz against its hand-digitised centre lines
   (``--fusa-roads`` reuses a finished ``gisroads lidar`` GeoPackage).
 
@@ -26,7 +27,8 @@ from pathlib import Path
 import geopandas as gpd
 
 from gisroads.io.vector import read_layer
-from gisroads.synthetic import make_scene, write_cloud
+from gisroads.jobs import image_job, lidar_job
+from gisroads.synthetic import make_scene, write_cloud, write_image
 from gisroads.update import pooled_scores
 
 LIDAR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lidar"
@@ -41,7 +43,6 @@ def scene_edges(scene) -> gpd.GeoDataFrame:
 
 def lidar_roads(cloud: Path, out: Path) -> gpd.GeoDataFrame:
     """The LiDAR pipeline's centre lines of ``cloud`` (written to ``out``)."""
-    from gisroads.jobs import lidar_job
     lidar_job(cloud, out)
     return read_layer(out)
 
@@ -67,6 +68,11 @@ def main() -> None:
     write_cloud(small, args.out / "synthetic.laz", density_per_m2=4.0)
     extracted = lidar_roads(args.out / "synthetic.laz", args.out / "synthetic_roads.gpkg")
     results["synthetic_lidar"] = pooled_scores(extracted, scene_edges(small), seeds)
+
+    write_image(small, args.out / "synthetic.tif", args.out / "synthetic_dsm.tif", pixel_m=0.5)
+    image_job(args.out / "synthetic.tif", args.out / "synthetic_image_roads.gpkg", nir_band=4)
+    results["synthetic_imagery"] = pooled_scores(
+        read_layer(args.out / "synthetic_image_roads.gpkg"), scene_edges(small), seeds)
 
     fusa = (read_layer(args.fusa_roads) if args.fusa_roads
             else lidar_roads(LIDAR / "fusa.laz", args.out / "fusa_roads.gpkg"))
