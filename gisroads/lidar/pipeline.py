@@ -25,7 +25,7 @@ import shapely
 
 from ..features.edges import local_energy
 from ..geo import GeoRaster, RoadNetwork
-from ..io.las import LasError, PointCloud, cloud_crs, las_info, read_las
+from ..io.las import LasError, PointCloud, cloud_crs, iter_las_chunks, las_info, read_las
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.rasters import raster_to_network
@@ -45,6 +45,8 @@ CUES = ("intensity", "evidence")
 #: Likelihood at which an evidence cell is road: the combined cues must all agree, since
 #: paved non-road surfaces (car parks, footpaths) score as road on every per-cell cue.
 EVIDENCE_THRESHOLD = 0.8
+#: Largest mosaic of tile rasters (ground heights, intensity, evidence) made in memory.
+MOSAIC_BUDGET_BYTES = 4 * 2**30
 @dataclass
 class TileRoads:
     """What one tile gives: its roads and the intermediate products, for QA."""
@@ -181,6 +183,16 @@ def _with_level(frame: gpd.GeoDataFrame, anchors, levelled: gpd.GeoDataFrame
     return frame
 
 
+def _covered_m2(tiles) -> float:
+    """Ground the tiles' cores cover (the cloud's area, not its bounding box's)."""
+    return float(sum((t.core[2] - t.core[0]) * (t.core[3] - t.core[1]) for t in tiles))
+
+
+def _points_xy(path):
+    """The file's points, chunk by chunk (x, y in metres), for the tiles that hold them."""
+    return (chunk.xyz[:, :2] for chunk in iter_las_chunks(path))
+
+
 def evidence_raster(path, *, tile_m: float = 300.0, overlap_m: float = 100.0,
                     cell_m: float | None = None, min_points: int = 1000,
                     progress: Progress = None) -> tuple[GeoRaster | None, dict, dict]:
@@ -199,10 +211,10 @@ def evidence_raster(path, *, tile_m: float = 300.0, overlap_m: float = 100.0,
         Cue -> how it was measured, and cue -> why it was left out (first tile).
     """
     info = las_info(path)
-    xmin, ymin, xmax, ymax = info["extent_m"]
+    tiles = tile_grid(info["extent_m"], tile_m=tile_m, overlap_m=overlap_m,
+                      points_xy=_points_xy(path))
     if cell_m is None:
-        cell_m = auto_cell_m(info["point_count"], (xmax - xmin) * (ymax - ymin))
-    tiles = tile_grid(info["extent_m"], tile_m=tile_m, overlap_m=overlap_m)
+        cell_m = auto_cell_m(info["point_count"], _covered_m2(tiles))
     pieces, references, used, missing = [], None, {}, {}
     for i, tile in enumerate(tiles):
         report(progress, i / len(tiles), f"tile {i + 1} of {len(tiles)}: road evidence")
@@ -291,10 +303,10 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
                                progress=progress, tile_m=tile_m, overlap_m=overlap_m,
                                cell_m=cell_m, min_points=min_points)
     info = las_info(path)
-    xmin, ymin, xmax, ymax = info["extent_m"]
+    tiles = tile_grid(info["extent_m"], tile_m=tile_m, overlap_m=overlap_m,
+                      points_xy=_points_xy(path))
     if cell_m is None:
-        cell_m = auto_cell_m(info["point_count"], (xmax - xmin) * (ymax - ymin))
-    tiles = tile_grid(info["extent_m"], tile_m=tile_m, overlap_m=overlap_m)
+        cell_m = auto_cell_m(info["point_count"], _covered_m2(tiles))
     results = []
     for i, tile in enumerate(tiles):
         step = scaled(progress, i / len(tiles), (i + 1) / len(tiles))
@@ -356,6 +368,12 @@ def mosaic_cores(rasters: list[tuple[Tile, GeoRaster]], cell_m: float) -> GeoRas
     ymax = max(t.core[3] for t, _ in rasters)
     transform, (rows, cols) = image_grid((xmin, ymin, xmax, ymax), cell_m)
     bands = max(r.data.shape[0] for _, r in rasters)
+    if bands * rows * cols * 4 > MOSAIC_BUDGET_BYTES:
+        raise ValueError(
+            f"a mosaic of the tiles over {xmax - xmin:.0f} m x {ymax - ymin:.0f} m at "
+            f"{cell_m:g} m cells would take {bands * rows * cols * 4 / 2**30:.1f} GiB (budget "
+            f"{MOSAIC_BUDGET_BYTES / 2**30:.0f} GiB): the cloud's points lie far apart; split "
+            "the file by area or choose a coarser cell")
     mosaic = np.full((bands, rows, cols), np.nan, np.float32)
     for tile, raster in rasters:  # one copy per tile
         r0 = int(round((transform.f - tile.core[3]) / cell_m))

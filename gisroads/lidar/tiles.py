@@ -36,12 +36,12 @@ class Tile:
     core: tuple[float, float, float, float]
 
 
-def _starts(lo: float, hi: float, tile_m: float, stride_m: float) -> np.ndarray:
-    count = max(1, int(np.ceil((hi - lo - tile_m) / stride_m)) + 1)
-    return lo + stride_m * np.arange(count)
+def _counts(lo: float, hi: float, tile_m: float, stride_m: float) -> int:
+    return max(1, int(np.ceil((hi - lo - tile_m) / stride_m)) + 1)
 
 
-def tile_grid(extent, *, tile_m: float = 300.0, overlap_m: float = 100.0) -> list[Tile]:
+def tile_grid(extent, *, tile_m: float = 300.0, overlap_m: float = 100.0,
+              points_xy=None) -> list[Tile]:
     """Tiles of ``tile_m`` overlapping their neighbours by ``overlap_m`` over an extent.
 
     Parameters
@@ -52,29 +52,56 @@ def tile_grid(extent, *, tile_m: float = 300.0, overlap_m: float = 100.0) -> lis
         Tile side, metres (paper: 300 m).
     overlap_m : float
         Overlap with each neighbour, metres (paper: 100 m); must be below ``tile_m``.
+    points_xy : iterable of ndarray (n, 2), optional
+        The points (e.g. chunk by chunk): only tiles holding one are made, so a cloud with
+        a few stray points far from the rest (a bad GPS fix, two surveys in one file) gets
+        tiles where its points are, not over its whole bounding box.
 
     Returns
     -------
     list of Tile
-        Row by row from the south-west; cores partition the extent.
+        Row by row from the south-west; cores partition the extent (the occupied part of
+        it with ``points_xy``).
     """
     if not 0 <= overlap_m < tile_m:
         raise ValueError(f"overlap_m ({overlap_m}) must be in [0, tile_m={tile_m})")
     xmin, ymin, xmax, ymax = map(float, extent)
     stride = tile_m - overlap_m
-    xs, ys = _starts(xmin, xmax, tile_m, stride), _starts(ymin, ymax, tile_m, stride)
+    nx, ny = _counts(xmin, xmax, tile_m, stride), _counts(ymin, ymax, tile_m, stride)
+    if points_xy is None:
+        rows, cols = np.divmod(np.arange(nx * ny), nx)
+    else:
+        rows, cols = _occupied(points_xy, (xmin, ymin), stride, tile_m, nx, ny)
     half = overlap_m / 2.0
+    x0, y0 = xmin + stride * cols, ymin + stride * rows
+    # cores meet halfway through the overlaps and reach the extent at its border
+    cx0 = np.where(cols == 0, xmin, x0 + half)
+    cx1 = np.where(cols == nx - 1, xmax, x0 + stride + half)
+    cy0 = np.where(rows == 0, ymin, y0 + half)
+    cy1 = np.where(rows == ny - 1, ymax, y0 + stride + half)
+    return [Tile(int(r), int(c), (float(a), float(b), float(a) + tile_m, float(b) + tile_m),
+                 (float(e), float(f), float(g), float(h)))
+            for r, c, a, b, e, f, g, h in zip(rows, cols, x0, y0, cx0, cy0, cx1, cy1)]
 
-    def core_edges(starts, lo, hi):
-        edges = np.append(starts + half, starts[-1] + tile_m - half)
-        edges[0], edges[-1] = lo, hi
-        return edges[:-1], edges[1:]
 
-    cx0, cx1 = core_edges(xs, xmin, xmax)
-    cy0, cy1 = core_edges(ys, ymin, ymax)
-    return [Tile(r, c, (xs[c], ys[r], xs[c] + tile_m, ys[r] + tile_m),
-                 (cx0[c], cy0[r], cx1[c], cy1[r]))
-            for r in range(len(ys)) for c in range(len(xs))]
+def _occupied(points_xy, origin, stride: float, tile_m: float, nx: int, ny: int):
+    """Rows and columns (sorted row by row) of the tiles holding at least one point."""
+    reach = int(np.ceil(tile_m / stride))   # strides a tile spans
+    cells = set()
+    for xy in points_xy:
+        xy = np.asarray(xy, float)
+        cell = np.floor((xy - origin) / stride).astype(np.int64)
+        cells.update(map(tuple, np.unique(cell, axis=0)))
+    if not cells:
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    cells = np.array(sorted(cells))
+    # a tile starting at stride cell (r, c) spans cells r .. r + reach - 1 (same for c)
+    shifts = np.stack(np.meshgrid(np.arange(reach), np.arange(reach)), -1).reshape(-1, 2)
+    tiles = (cells[:, None, ::-1] - shifts[None]).reshape(-1, 2)
+    tiles = tiles[(tiles[:, 0] >= 0) & (tiles[:, 0] < ny) & (tiles[:, 1] >= 0)
+                  & (tiles[:, 1] < nx)]
+    tiles = np.unique(tiles, axis=0)
+    return tiles[:, 0], tiles[:, 1]
 
 
 def clip_to_core(lines: gpd.GeoDataFrame, tile: Tile) -> gpd.GeoDataFrame:
