@@ -15,7 +15,7 @@ Class ``new`` is the deleted roads found again, ``missing`` the fake roads flagg
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/road_database_update.py [--out DIR]
 
-Not wired into bench/run.py.
+``make bench`` runs it too (bench/run.py, case road_database_update).
 """
 from __future__ import annotations
 
@@ -47,6 +47,37 @@ def lidar_roads(cloud: Path, out: Path) -> gpd.GeoDataFrame:
     return read_layer(out)
 
 
+def measure(out: Path, seeds: int = 10, fusa_roads: Path | None = None) -> dict:
+    """Every case's pooled scores over ``seeds`` edits; scratch files in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    edits = range(seeds)
+    results = {}
+
+    scene = make_scene(seed=0, size_m=(1000.0, 700.0))
+    start = time.perf_counter()
+    results["synthetic_truth"] = pooled_scores(scene.truth.centrelines, scene_edges(scene),
+                                               edits)
+    results["synthetic_truth"]["seconds_per_edit"] = (time.perf_counter() - start) / seeds
+
+    small = make_scene(seed=1, size_m=(500.0, 500.0))
+    write_cloud(small, out / "synthetic.laz", density_per_m2=4.0)
+    extracted = lidar_roads(out / "synthetic.laz", out / "synthetic_roads.gpkg")
+    results["synthetic_lidar"] = pooled_scores(extracted, scene_edges(small), edits)
+
+    write_image(small, out / "synthetic.tif", out / "synthetic_dsm.tif", pixel_m=0.5)
+    image_job(out / "synthetic.tif", out / "synthetic_image_roads.gpkg", nir_band=4)
+    results["synthetic_imagery"] = pooled_scores(
+        read_layer(out / "synthetic_image_roads.gpkg"), scene_edges(small), edits)
+
+    fusa = (read_layer(fusa_roads) if fusa_roads
+            else lidar_roads(LIDAR / "fusa.laz", out / "fusa_roads.gpkg"))
+    truth = gpd.read_file(FUSA_TRUTH)
+    # a 250 m tile: fake roads 20-40 m long, 15 m clear of the digitised roads
+    results["fusa"] = pooled_scores(fusa, truth, edits, fake_length_m=(20.0, 40.0),
+                                    fake_clearance_m=15.0)
+    return results
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("out/bench/road_database_update"))
@@ -54,33 +85,7 @@ def main() -> None:
     parser.add_argument("--fusa-roads", type=Path,
                         help="a finished 'gisroads lidar fusa.laz' GeoPackage to reuse")
     args = parser.parse_args()
-    args.out.mkdir(parents=True, exist_ok=True)
-    seeds = range(args.seeds)
-    results = {}
-
-    scene = make_scene(seed=0, size_m=(1000.0, 700.0))
-    start = time.perf_counter()
-    results["synthetic_truth"] = pooled_scores(scene.truth.centrelines, scene_edges(scene),
-                                               seeds)
-    results["synthetic_truth"]["seconds_per_edit"] = (time.perf_counter() - start) / len(seeds)
-
-    small = make_scene(seed=1, size_m=(500.0, 500.0))
-    write_cloud(small, args.out / "synthetic.laz", density_per_m2=4.0)
-    extracted = lidar_roads(args.out / "synthetic.laz", args.out / "synthetic_roads.gpkg")
-    results["synthetic_lidar"] = pooled_scores(extracted, scene_edges(small), seeds)
-
-    write_image(small, args.out / "synthetic.tif", args.out / "synthetic_dsm.tif", pixel_m=0.5)
-    image_job(args.out / "synthetic.tif", args.out / "synthetic_image_roads.gpkg", nir_band=4)
-    results["synthetic_imagery"] = pooled_scores(
-        read_layer(args.out / "synthetic_image_roads.gpkg"), scene_edges(small), seeds)
-
-    fusa = (read_layer(args.fusa_roads) if args.fusa_roads
-            else lidar_roads(LIDAR / "fusa.laz", args.out / "fusa_roads.gpkg"))
-    truth = gpd.read_file(FUSA_TRUTH)
-    # a 250 m tile: fake roads 20-40 m long, 15 m clear of the digitised roads
-    results["fusa"] = pooled_scores(fusa, truth, seeds, fake_length_m=(20.0, 40.0),
-                                    fake_clearance_m=15.0)
-
+    results = measure(args.out, args.seeds, args.fusa_roads)
     (args.out / "results.json").write_text(json.dumps(results, indent=2))
     print(json.dumps(results, indent=2))
 

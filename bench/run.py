@@ -630,13 +630,25 @@ def case_vectorize_large(out: Path, data_dir: str, size_px: int = 5000) -> dict:
             "network_spurs_under_5m": _short_spurs(network.centrelines.geometry.values, 5.0)}
 
 
+def case_road_database_update(out: Path, seeds: int) -> dict:
+    """Change classes found against edited truths (bench/road_database_update.py): recall
+    and precision per source (truth, synthetic LiDAR and imagery, fusa) and class."""
+    from road_database_update import measure
+
+    return {f"{source}_{change}_{figure}": value
+            for source, classes in measure(out / "road_database_update", seeds).items()
+            for change, scores in classes.items() if isinstance(scores, dict)
+            for figure, value in scores.items() if figure in ("recall", "precision")}
+
+
 CASES = {"synth_cloud": case_synth_cloud, "evaluate": case_evaluate,
          "ground_planes": case_ground_planes, "lidar_tile": case_lidar_tile,
          "snakes_registration": case_snakes_registration,
          "snakes": case_snakes,
          "lidar_real": case_lidar_real, "imagery_real": case_imagery_real,
          "imagery_tile": case_imagery_tile, "vectorize_masks": case_vectorize_masks,
-         "vectorize_large": case_vectorize_large}
+         "vectorize_large": case_vectorize_large,
+         "road_database_update": case_road_database_update}
 
 
 def run_case(name: str, out: Path, params: dict) -> dict:
@@ -681,7 +693,8 @@ def main() -> None:
                                                 / "data" / "imagery")},
             "vectorize_large": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"
                                                 / "data" / "imagery"),
-                                "size_px": 2000 if args.quick else 5000}}
+                                "size_px": 2000 if args.quick else 5000},
+            "road_database_update": {"seeds": 3 if args.quick else 10}}
     results = {}
     for name, params in plan.items():
         print(f"running {name} {params} ...", flush=True)
