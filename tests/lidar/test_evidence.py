@@ -71,7 +71,7 @@ def test_likelihood_separates_the_roads_of_a_synthetic_scene(scene_cloud):
     data = evidence.likelihood.data
     assert data.dtype == np.float32 and evidence.cell_m == 0.5
     assert np.nanmin(data) >= 0.0 and np.nanmax(data) <= 1.0
-    # measured 0.950
+    # measured 0.948
     assert auc_against(evidence, truth) > 0.92
     assert set(evidence.used) == {"height", "density", "roughness", "slope", "intensity",
                                   "returns", "classification"}
@@ -137,7 +137,7 @@ def test_fusa_likelihood_against_its_hand_digitised_road_area(lidar_dir):
 
     evidence = road_evidence(read_las(lidar_dir / "fusa.laz"))
     area = gpd.read_file(lidar_dir / "ground_truth" / "fusa" / "road_area.geojson")
-    # measured 0.870 (intensity alone 0.830, height alone 0.726)
+    # measured 0.860 (intensity alone 0.818, height alone 0.726)
     assert auc_against(evidence, area.geometry) > 0.84
     assert set(evidence.used) >= {"intensity", "classification", "returns"}
     assert "split returns" in evidence.used["intensity"]
@@ -161,7 +161,7 @@ def test_tiles_normalised_by_the_whole_clouds_references_match_the_whole(scene_c
     assert (np.abs(a - b) < 1e-3).mean() > 0.99
 
 
-@pytest.mark.parametrize("name, measured", [("Megaplot.laz", 0.080), ("crop_1.laz", 0.051)])
+@pytest.mark.parametrize("name, measured", [("Megaplot.laz", 0.070), ("crop_1.laz", 0.017)])
 def test_little_of_a_forest_plot_or_a_field_looks_like_road(lidar_dir, name, measured):
     likelihood = road_evidence(read_las(lidar_dir / name)).likelihood.data
     assert (likelihood[np.isfinite(likelihood)] > 0.5).mean() < measured + 0.05

@@ -1,0 +1,248 @@
+"""Road evidence through the network stage: variants measured on every real cloud and on
+the synthetic scenes (issue 10's targets).
+
+Each variant is a likelihood (``gisroads.lidar.evidence.road_evidence``, optionally edited)
+and a call of ``gisroads.network.rasters.raster_to_network``. Scored with a 3 m buffer
+against the hand-digitised centre lines (fusa; the IGN tile: completeness only, its truth is
+partial), ``Ks`` the correctness counting the truth's car-park aisles (``service``) as right,
+junctions matched within 10 m; on zurich, crop_1, Megaplot, autzen and the extra-bytes file
+the km of lines (no public road in the first three); the synthetic 300 m scenes of
+``tests/lidar/test_quality.py`` (street grid with houses and trees; every feature) at 8
+pulses/m2 against their exact truth.
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/lidar_evidence_network.py \\
+        [--variants base,recommended] [--rectangles] [--out /tmp/evidence_network]
+
+``--rectangles`` adds the variant confirmed by the paper's rectangle cover (runs the
+paper's pipeline on every file, about 90 s). Not wired into bench/run.py.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+import warnings
+from pathlib import Path
+
+import geopandas as gpd
+import numpy as np
+import pandas as pd
+import shapely
+from rasterio import features
+from scipy import ndimage
+
+from gisroads.evaluate.buffer import buffer_metrics
+from gisroads.evaluate.topology import junction_metrics
+from gisroads.geo import GeoRaster
+from gisroads.io.las import concatenate, read_las
+from gisroads.lidar.evidence import (EvidenceRule, _cell_min, _ratio, _smooth, road_evidence,
+                                     vehicle_cells, without_car_park_aisles)
+from gisroads.network.rasters import raster_to_network
+
+LIDAR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lidar"
+TRUTH = LIDAR / "ground_truth"
+REAL = {"fusa": "fusa", "IGN": "test_semis_2023_0292_6833_LA93_IGN69", "zurich": "zurich",
+        "crop_1": "crop_1", "Megaplot": "Megaplot", "autzen": "autzen_trim",
+        "xbytes": "las_with_several_extra_byte_bloc"}
+SYNTHETIC = {"syn_grid": {"features": ("buildings", "trees")}, "syn_full": {}}
+OLD_RULE = EvidenceRule(intensity=(0.3, 0.8))
+#: Kerb cut (experiment): a kerb step of h metres smoothed at sigma 0.5 m peaks at
+#: h / (0.5 sqrt(2 pi)) rise over run; 0.06 is a 7.5 cm step.
+KERB_GRADIENT = 0.06
+
+
+def ground_step(cloud, evidence, sigma_m: float = 0.5, trend_m: float = 3.0) -> np.ndarray:
+    """Gradient magnitude of the lowest ground returns smoothed at ``sigma_m`` minus their
+    trend at ``trend_m`` (a steady slope gives 0, a kerb a ridge); NaN far from ground."""
+    lik = evidence.likelihood
+    t, (rows, cols), cell = lik.transform, lik.shape, evidence.cell_m
+    x, y, z = np.asarray(cloud.xyz, float).T
+    col = np.floor((x - t.c) / cell).astype(int)
+    row = np.floor((t.f - y) / cell).astype(int)
+    ok = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
+    lowest = _cell_min((row * cols + col)[ok], z[ok], rows * cols).reshape(rows, cols)
+    ground = np.where(evidence.measures["height"].data <= 0.25, lowest, np.nan)
+    known = np.isfinite(ground)
+    z0 = np.where(known, ground, 0.0)
+
+    def smooth(s):
+        return _ratio(_smooth(z0, s / cell), _smooth(known.astype(float), s / cell))
+
+    s = max(sigma_m, cell)
+    gy, gx = np.gradient(smooth(s) - smooth(trend_m), cell)
+    step = np.hypot(gx, gy)
+    step[~(_smooth(known.astype(float), s / cell) > 0.3)] = np.nan
+    return step
+
+
+def kerb_cut(cloud, evidence, likelihood: GeoRaster) -> GeoRaster:
+    """Cells on a kerb or median step (and one cell around) set to 0; clouds with cells
+    over 1 m cannot resolve a kerb and are left alone."""
+    if evidence.cell_m > 1.0:
+        return likelihood
+    kerb = ndimage.binary_dilation(np.nan_to_num(ground_step(cloud, evidence)) >= KERB_GRADIENT)
+    data = np.array(likelihood.data, np.float32)
+    data[kerb & np.isfinite(data)] = 0.0
+    return GeoRaster(data, likelihood.transform, likelihood.crs, nodata=np.nan)
+
+
+def otsu(values) -> float:
+    from skimage.filters import threshold_otsu
+    return float(threshold_otsu(values[np.isfinite(values)]))
+
+
+def network(likelihood, evidence, *, threshold=0.8, low=None, aisles=False):
+    options = {"low_threshold": low} if low is not None else None
+    net = raster_to_network(likelihood, threshold=threshold, part_options=options)
+    if aisles and len(net.centrelines):
+        cleared, found = without_car_park_aisles(likelihood, net.centrelines,
+                                                 vehicle_cells(evidence))
+        if len(found):
+            net = raster_to_network(cleared, threshold=threshold, part_options=options)
+    return net
+
+
+def confirmed(likelihood, evidence, paper_lines, *, share=0.3, near_m=4.0):
+    """Roads of the network with at least ``share`` of their length within ``near_m`` of
+    the paper's centre lines; the others erased from the likelihood, network run again."""
+    net = network(likelihood, evidence)
+    lines = net.centrelines
+    if len(lines) == 0:
+        return net
+    zone = (shapely.buffer(shapely.union_all(paper_lines.to_crs(lines.crs).geometry.values),
+                           near_m) if len(paper_lines) else shapely.Polygon())
+    g = lines.geometry.values
+    bad = lines[shapely.length(shapely.intersection(g, zone)) / shapely.length(g) < share]
+    if len(bad) == 0:
+        return net
+    erase = features.rasterize(
+        list(shapely.buffer(bad.geometry.values, bad["width_m"].to_numpy() / 2 + 1.0)),
+        out_shape=likelihood.shape, transform=likelihood.transform).astype(bool)
+    data = np.array(likelihood.data, np.float32)
+    data[erase] = 0.0
+    return raster_to_network(GeoRaster(data, likelihood.transform, likelihood.crs,
+                                       nodata=np.nan), threshold=0.8)
+
+
+#: name: (rule, description, function(cloud, evidence, context) -> network)
+VARIANTS = {
+    "base": (OLD_RULE, "ramp (0.3, 0.8), threshold 0.8 (before this work)",
+             lambda c, e, x: network(e.likelihood, e)),
+    "base_t0.5": (OLD_RULE, "ramp (0.3, 0.8), threshold 0.5",
+                  lambda c, e, x: network(e.likelihood, e, threshold=0.5)),
+    "otsu": (OLD_RULE, "ramp (0.3, 0.8), Otsu threshold of the file's likelihood",
+             lambda c, e, x: network(e.likelihood, e, threshold=otsu(e.likelihood.data))),
+    "kerb": (OLD_RULE, "ramp (0.3, 0.8), kerb cut, threshold 0.8",
+             lambda c, e, x: network(kerb_cut(c, e, e.likelihood), e)),
+    "aisles": (OLD_RULE, "ramp (0.3, 0.8), threshold 0.8, car-park aisles out",
+               lambda c, e, x: network(e.likelihood, e, aisles=True)),
+    "ramp0.6": (EvidenceRule(), "ramp (0.3, 0.6), threshold 0.8",
+                lambda c, e, x: network(e.likelihood, e)),
+    "ramp0.6_hyst": (EvidenceRule(), "ramp (0.3, 0.6), hysteresis 0.8 / 0.6",
+                     lambda c, e, x: network(e.likelihood, e, low=0.6)),
+    "recommended": (EvidenceRule(), "ramp (0.3, 0.6), hysteresis 0.8 / 0.6, aisles out",
+                    lambda c, e, x: network(e.likelihood, e, low=0.6, aisles=True)),
+    "recommended_kerb": (EvidenceRule(), "recommended + kerb cut",
+                         lambda c, e, x: network(kerb_cut(c, e, e.likelihood), e, low=0.6,
+                                                 aisles=True)),
+    "hyst0.5": (EvidenceRule(), "ramp (0.3, 0.6), hysteresis 0.8 / 0.5, aisles out",
+                lambda c, e, x: network(e.likelihood, e, low=0.5, aisles=True)),
+    "confirmed": (OLD_RULE, "ramp (0.3, 0.8), threshold 0.8, roads confirmed by the paper's "
+                            "rectangles", lambda c, e, x: confirmed(e.likelihood, e, x)),
+}
+
+
+def clouds():
+    """(name, cloud, truth lines or None, truth junctions or None, service or None)."""
+    for name, stem in REAL.items():
+        cloud = read_las(LIDAR / f"{stem}.laz")
+        folder = TRUTH / stem.replace("_LA93_IGN69", "")
+        roads = junctions = service = None
+        if (folder / "centrelines.geojson").exists():
+            roads = gpd.read_file(folder / "centrelines.geojson")
+            junctions = gpd.read_file(folder / "junctions.geojson")
+            service = gpd.read_file(folder / "service.geojson")
+            if len(roads) == 0:
+                roads = None
+        yield name, cloud, roads, junctions, service
+    from gisroads.synthetic import make_scene, render_cloud
+    for name, args in SYNTHETIC.items():
+        scene = make_scene(seed=0, size_m=(300.0, 300.0), **args)
+        cloud = concatenate(list(render_cloud(scene, density_per_m2=8.0, seed=0)))
+        yield name, cloud, scene.truth.centrelines, scene.truth.junctions, None
+
+
+def score(name, net, roads, junctions, service) -> dict:
+    lines = net.centrelines
+    row = {"km": lines.length.sum() / 1000, "junctions": len(net.junctions)}
+    if roads is None:
+        return row
+    lines = lines.to_crs(roads.crs) if roads.crs is not None else lines
+    scores = buffer_metrics(lines, roads, buffer_m=3.0)
+    row["C"] = scores.completeness
+    if name != "IGN":  # partial truth: completeness only
+        row["K"] = scores.correctness
+        if service is not None and len(service):
+            row["Ks"] = buffer_metrics(lines, pd.concat([roads, service]),
+                                       buffer_m=3.0).correctness
+    if junctions is not None and len(junctions):
+        found = junction_metrics(net.junctions.to_crs(roads.crs) if roads.crs else
+                                 net.junctions, junctions, radius_m=10.0)
+        row["J"] = f"{found['junction_matches']}/{found['junctions_reference']}"
+    return row
+
+
+def markdown(frame: pd.DataFrame) -> str:
+    """A pipe table, floats to 3 decimals, missing as '-'."""
+    def cell(v):
+        if isinstance(v, float):
+            return "-" if np.isnan(v) else f"{v:.3f}"
+        return str(v)
+    lines = ["| " + " | ".join(frame.columns) + " |", "|" + "---|" * len(frame.columns)]
+    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(index=False)]
+    return "\n".join(lines)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--variants", default=",".join(v for v in VARIANTS if v != "confirmed"))
+    parser.add_argument("--rectangles", action="store_true")
+    parser.add_argument("--out", type=Path, default=Path("/tmp/evidence_network"))
+    args = parser.parse_args()
+    names = args.variants.split(",") + (["confirmed"] if args.rectangles else [])
+    args.out.mkdir(parents=True, exist_ok=True)
+    warnings.simplefilter("ignore")
+    rows = []
+    for name, cloud, roads, junctions, service in clouds():
+        paper = None
+        if "confirmed" in names:
+            from gisroads.lidar.pipeline import extract_roads
+            path = LIDAR / f"{REAL.get(name, name)}.laz"
+            if not path.exists():
+                from gisroads.synthetic import make_scene, write_cloud
+                path = args.out / f"{name}.laz"
+                write_cloud(make_scene(seed=0, size_m=(300.0, 300.0), **SYNTHETIC[name]),
+                            path, density_per_m2=8.0, seed=0)
+            paper = extract_roads(path).network.centrelines
+        evidences = {}
+        for variant in names:
+            rule, _, run = VARIANTS[variant]
+            start = time.perf_counter()
+            if rule not in evidences:
+                evidences[rule] = road_evidence(cloud, rule=rule)
+            net = run(cloud, evidences[rule], paper)
+            rows.append({"variant": variant, "file": name, **score(name, net, roads, junctions,
+                                                                   service),
+                         "s": time.perf_counter() - start})
+            print(rows[-1], flush=True)
+    table = pd.DataFrame(rows)
+    table.to_csv(args.out / "results.csv", index=False)
+    with open(args.out / "results.md", "w") as out:
+        for variant in names:
+            part = table[table.variant == variant].drop(columns="variant")
+            out.write(f"\n### {variant}: {VARIANTS[variant][1]}\n\n")
+            out.write(markdown(part) + "\n")
+    print((args.out / "results.md").read_text())
+
+
+if __name__ == "__main__":
+    main()
