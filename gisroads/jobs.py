@@ -19,6 +19,7 @@ from .io.quicklook import write_quicklook
 from .io.raster import raster_info, read_raster, write_geotiff
 from .io.vector import list_layers, read_layer, write_geopackage
 from .progress import Progress, report, scaled, to_json
+from .resources import demo_dir
 from .synthetic import make_scene, render_image, write_cloud
 
 VECTOR_SUFFIXES = {".gpkg", ".geojson", ".json", ".shp", ".fgb", ".kml", ".gml"}
@@ -689,16 +690,17 @@ def snakes_job(cloud_path, map_source, out_path, *, curb_detector: str = "exp",
     return result
 
 
-DEMO_DATA = Path(__file__).resolve().parents[1] / "data" / "demo"
-"""The bundled sample data (``data/demo`` beside ``gisroads/`` in the repository; its README
-gives the sources and licences)."""
 DEMO_IMAGE = "spacenet_paris_img1447.tif"
 DEMO_IMAGE_TRUTH = "osm_roads_img1447.geojson"
 DEMO_CLOUD = "ign_lidar_hd_0292_6833_thinned.laz"
 
 
-def demo_job(out_dir, *, data_dir=DEMO_DATA, progress: Progress = None) -> dict:
+def demo_job(out_dir, *, data_dir=None, progress: Progress = None) -> dict:
     """The demo on the bundled real data: both road pipelines, their GeoPackages and PNGs.
+
+    ``data_dir`` defaults to the bundled sample data: the package data of a wheel
+    (``gisroads/_demo``), the repository's ``data/demo`` in a checkout
+    (:func:`gisroads.resources.demo_dir`); its README gives the sources and licences.
 
     * the imagery pipeline on a SpaceNet Paris tile (RGB, 0.3 m), scored against its
       OpenStreetMap centre lines (``image_roads.gpkg``, ``image_roads.png``,
@@ -710,7 +712,7 @@ def demo_job(out_dir, *, data_dir=DEMO_DATA, progress: Progress = None) -> dict:
     """
     from .evaluate import format_report
 
-    data, out = Path(data_dir), Path(out_dir)
+    data, out = Path(demo_dir() if data_dir is None else data_dir), Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     image = image_job(data / DEMO_IMAGE, out / "image_roads.gpkg",
                       quicklook=out / "image_roads.png", progress=scaled(progress, 0.0, 0.3))

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Assembles the QGIS plugin folder gisroads_qgis/ (processing_provider/ at its root, plus
-# metadata.txt, the gisroads core and styles/) and zips it into dist/gisroads_qgis.zip,
-# the form QGIS's "Install from ZIP" and a profile's plugin folder take.
+# metadata.txt and the gisroads core with styles/ as its package data gisroads/_styles, as
+# in a wheel: see setup.py) and zips it into dist/gisroads_qgis.zip, the form QGIS's
+# "Install from ZIP" and a profile's plugin folder take.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build=$(mktemp -d)
@@ -10,7 +11,9 @@ plugin="$build/gisroads_qgis"
 mkdir -p "$plugin"
 cp -r processing_provider/. "$plugin/"
 cp metadata.txt "$plugin/"
-cp -r gisroads styles "$plugin/"
+cp -r gisroads "$plugin/"
+rm -rf "$plugin/gisroads/_styles" "$plugin/gisroads/_demo"
+cp -r styles "$plugin/gisroads/_styles"
 find "$plugin" -name "__pycache__" -prune -exec rm -rf {} +
 mkdir -p dist
 # a private temporary name: two builds running at once each rename a whole zip into place

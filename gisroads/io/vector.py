@@ -20,10 +20,12 @@ from pathlib import Path
 import geopandas as gpd
 
 from ..geo import CONTRACT_GEOMETRY
+from ..resources import styles_dir
 
-STYLES_DIR = Path(__file__).resolve().parents[2] / "styles"
-"""QML files, one per layer name (``road_centrelines.qml`` ...). In the assembled QGIS plugin
-``styles/`` sits beside ``gisroads/`` as it does in the repository."""
+STYLES_DIR = styles_dir()
+"""QML files, one per layer name (``road_centrelines.qml`` ...): the package data of a wheel
+or of the QGIS plugin (``gisroads/_styles``), the repository's ``styles/`` in a checkout
+(:mod:`gisroads.resources`)."""
 
 
 @contextmanager
