@@ -116,6 +116,18 @@ def _metres(text: str) -> tuple[float, ...]:
         raise argparse.ArgumentTypeError(str(err)) from None
 
 
+def _then_compare(args, result: dict) -> dict:
+    """With ``--database``, compare the roads just written with the road database."""
+    if args.database is None:
+        return result
+    from .jobs import update_job
+    changes = args.changes or args.out.with_name(f"{args.out.stem}_changes.gpkg")
+    result["changes"] = update_job(args.out, args.database, changes,
+                                   layer=args.database_layer, id_field=args.id_field,
+                                   width_field=args.width_field)
+    return result
+
+
 def cmd_lidar(args) -> int:
     from .jobs import lidar_job
     options = dict(cue=args.cue, cell_m=args.cell, tile_m=args.tile, overlap_m=args.overlap,
@@ -127,7 +139,7 @@ def cmd_lidar(args) -> int:
     result = lidar_job(args.input, args.out, tagged_las=args.tagged_las,
                        rasters_dir=args.rasters, quicklook=args.quicklook,
                        progress=_ProgressBar(not args.json), **options)
-    _print(result, args.json)
+    _print(_then_compare(args, result), args.json)
     return 0
 
 
@@ -147,7 +159,7 @@ def cmd_image(args) -> int:
                        dsm_path=args.dsm, pixel_m=args.pixel, crs=args.crs,
                        quicklook=args.quicklook, progress=_ProgressBar(not args.json),
                        **({"n_segments": args.segments} if args.segments else {}))
-    _print(result, args.json)
+    _print(_then_compare(args, result), args.json)
     return 0
 
 
@@ -165,7 +177,7 @@ def cmd_snakes(args) -> int:
     result = snakes_job(args.input, args.map, args.out, curb_detector=args.curb_detector,
                         tagged_las=args.tagged_las, attractor_tif=args.attractor,
                         progress=_ProgressBar(not args.json))
-    _print(result, args.json)
+    _print(_then_compare(args, result), args.json)
     return 0
 
 
@@ -197,6 +209,20 @@ def cmd_update(args) -> int:
                         coverage=args.coverage, progress=_ProgressBar(not args.json))
     _print(result, args.json)
     return 0
+
+
+def add_database_options(p) -> None:
+    """``--database`` and its options, on the road-extraction subcommands."""
+    p.add_argument("--database", help="also compare the roads found with this road database "
+                                      "(any OGR source, e.g. roads.gpkg or 'PG:dbname=gis'), "
+                                      "as gisroads update does")
+    p.add_argument("--changes", type=Path,
+                   help="GeoPackage of the change layers (default: OUT_changes.gpkg)")
+    p.add_argument("--database-layer", help="the database's layer or table (default: its "
+                                            "first)")
+    p.add_argument("--id-field", help="the database's feature id field (default: its OGR "
+                                      "feature ids)")
+    p.add_argument("--width-field", help="the database's road width field, metres")
 
 
 def add_update_parser(add) -> None:
@@ -326,6 +352,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also write intensity, likelihood and ground-height GeoTIFFs here "
                         "(with --cue evidence: road_evidence.tif)")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
+    add_database_options(p)
 
     p = add("blocks", cmd_blocks, "segment city blocks on a road-likelihood raster",
             "Segment a city into blocks bounded by roads (Zhu & Mordohai, section 5): "
@@ -368,6 +395,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--crs", help="projected CRS for an image without georeferencing, "
                                  "e.g. EPSG:32633")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
+    add_database_options(p)
 
     p = add("vectorize", cmd_vectorize, "any road raster (mask or probability) to a network",
             "Turn a road raster (a binary mask, or a road probability 0-1 or 0-255: a "
@@ -405,6 +433,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tagged-las", type=Path,
                    help="also write the cloud with road points classified 11")
     p.add_argument("--attractor", type=Path, help="also write the attractor map (GeoTIFF)")
+    add_database_options(p)
 
     p = add("demo", cmd_demo, "run both road pipelines on the bundled real data",
             "Run the imagery pipeline on a bundled SpaceNet Paris tile (scored against its "
