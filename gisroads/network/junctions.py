@@ -22,7 +22,10 @@ contract (:class:`gisroads.geo.RoadNetwork`) plus the QA layer ``junction_connec
    the end is extended to the point where its extension hits the other road (end-road), or
    joined to the other road's end by the short polygon through the intersection of both
    extensions. Roads that cross, or whose end overshoots another road by less than that
-   road's half width, meet at their intersection (crossing). Each road end receives at most
+   road's half width, meet at their intersection (crossing). An end lying on another
+   road's surface (within its half width plus ``overshoot_m``) whose extension misses that
+   road, as a lane running into a bend of the crossing road does, meets it where it comes
+   closest (end-road). Each road end receives at most
    one junction connection, the shortest; we accept the collinear (end-end) connections
    before the others, each kind shortest first, and after each acceptance the ends near the
    new connection search again. So a road interrupted at a junction is closed first and the
@@ -472,6 +475,15 @@ class _JunctionSearch:
             hit = _first_hit(ray, line, p)
             if hit is not None and self._crosses(d, line, hit):
                 found.append(self._end_road(end, target, hit, False))
+            elif shapely.distance(shapely.points(p), line) <= (self.width[target] / 2
+                                                               + self.overshoot_m):
+                # the end lies on the other road's surface but points along it (a lane
+                # running into a bend of the crossing road): it meets the road where the
+                # road comes closest
+                nearest = shapely.get_coordinates(
+                    shapely.shortest_line(shapely.points(p), line))[-1]
+                if np.hypot(*(nearest - p)) > _EPS_M:
+                    found.append(self._end_road(end, target, nearest, False))
         built = np.fromiter(self.built, dtype=np.int64, count=len(self.built))
         built_lines = np.array(list(self.built.values()), dtype=object)
         reached = shapely.intersects(built_lines, region) if len(built) else []
