@@ -167,8 +167,10 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
     in the cloud's CRS; optionally ``tagged_las`` (the cloud with road points in class 11),
     ``rasters_dir`` (per-level intensity and likelihood GeoTIFFs of every tile and the
     per-level ground heights, or ``road_evidence.tif``) and a ``quicklook`` PNG.
-    ``options`` go to :func:`gisroads.lidar.pipeline.extract_roads`. A cloud without roads
-    gives empty layers and a :class:`~gisroads.errors.NoRoadFoundWarning`.
+    ``options`` go to :func:`gisroads.lidar.pipeline.extract_roads` (``workers``,
+    ``scheduler`` and ``work_dir`` included); ``cloud_path`` may also be several files, a
+    folder of them or a glob. A cloud without roads gives empty layers and a
+    :class:`~gisroads.errors.NoRoadFoundWarning`.
 
     Returns
     -------
@@ -177,16 +179,25 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
     """
     from .lidar.pipeline import DEFAULT_WIDTHS_M, extract_roads, mosaic_cores
     from .lidar.tagging import ground_level_heights, tag_road_points
+    from .lidar.tilestore import inputs_crs, las_inputs
 
+    # one file, several, a folder or a glob (extract_roads); tagging copies one file
+    inputs = las_inputs(cloud_path)
+    if tagged_las is not None and len(inputs) > 1:
+        raise ValueError(f"a tagged LAS/LAZ copy is made of one input file, not of "
+                         f"{len(inputs)}: tag each file on its own")
+    cloud_path = inputs[0] if len(inputs) == 1 else cloud_path
     roads = extract_roads(cloud_path, progress=scaled(progress, 0.0, 0.85), **options)
     network = roads.network
     write_geopackage(out_path, network.layers())
     _warn_if_no_road(network, cloud_path)
-    working, _ = cloud_crs(cloud_path)
+    working, _ = inputs_crs(inputs)
     result = {"gpkg": Path(out_path), "roads": len(network.centrelines),
               "length_m": float(network.centrelines.length_m.sum()),
               "junctions": len(network.junctions), "tiles": len(roads.tiles),
-              "cue": options.get("cue", "intensity")}
+              "cue": options.get("cue", "intensity"), "input_files": len(inputs),
+              "tiles_run": roads.run.get("tiles", 0),
+              "tiles_reused": roads.run.get("reused", 0)}
     if roads.cues:
         result["cues"] = ",".join(roads.cues)
     # tiles with a ground level to image (a tile of a few metres may have none)
@@ -238,7 +249,7 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
             (network.junctions.to_crs(working),
              dict(color="yellow", markersize=20, label="junctions")),
         ], background=background,
-            title=f"{Path(cloud_path).name}: roads over the "
+            title=f"{Path(str(cloud_path)).name}: roads over the "
                   + ("road evidence" if roads.evidence is not None
                      else "ground intensity (level 0)"))
         result["quicklook"] = Path(quicklook)

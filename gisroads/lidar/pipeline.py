@@ -16,7 +16,12 @@ bridged by the integer program, junctions built, curved roads followed.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import hashlib
+import os
+import pickle
+from dataclasses import dataclass, field, replace
+from functools import lru_cache, partial
+from pathlib import Path
 
 import geopandas as gpd
 import numpy as np
@@ -25,7 +30,8 @@ import shapely
 
 from ..features.edges import local_energy
 from ..geo import GeoRaster, RoadNetwork
-from ..io.las import LasError, PointCloud, cloud_crs, iter_las_chunks, las_info, read_las
+from ..io.las import PointCloud
+from ..parallel import run_tasks
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.rasters import raster_to_network
@@ -37,7 +43,8 @@ from .hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, likelihood_
 from .intensity import IntensityImages, auto_cell_m, image_grid, intensity_images
 from .mincover import greedy_min_cover
 from .tagging import level_heights
-from .tiles import Tile, stitch_tiles, tile_grid
+from .tiles import Tile, stitch_tiles
+from .tilestore import TileStore, digest, inputs_crs, las_inputs, open_store
 
 METHOD = "zhu-mordohai"
 EVIDENCE_METHOD = "lidar-evidence"
@@ -71,6 +78,8 @@ class LidarRoads:
     """The road likelihood (``cue="evidence"``), in the working metre CRS."""
     cues: dict = field(default_factory=dict)
     """Cue name -> how it was measured (``cue="evidence"``: those the file allowed)."""
+    run: dict = field(default_factory=dict)
+    """``tiles``: tiles run; ``reused``: those taken finished from the work folder."""
 
 
 def ground_and_intensity(cloud: PointCloud, planes: GroundPlanes, *, bounds, cell_m: float
@@ -188,19 +197,102 @@ def _covered_m2(tiles) -> float:
     return float(sum((t.core[2] - t.core[0]) * (t.core[3] - t.core[1]) for t in tiles))
 
 
-def _points_xy(path):
-    """The file's points, chunk by chunk (x, y in metres), for the tiles that hold them."""
-    return (chunk.xyz[:, :2] for chunk in iter_las_chunks(path))
+@dataclass(frozen=True)
+class _TileJob:
+    """What a task needs to process one tile: picklable, sent to the Dask workers."""
+
+    store: TileStore
+    cue: str
+    min_points: int
+    options: dict
+    results: Path | None
+    """Folder of finished tiles (None: nothing kept)."""
+    references: object = None
+
+
+def _tile_result_path(job: _TileJob, tile: Tile) -> Path | None:
+    return None if job.results is None else job.results / f"tile_{tile.row}_{tile.col}.pkl"
+
+
+def _run_tile(job: _TileJob, tile: Tile):
+    """``(reused, result)`` of one tile: its :class:`TileRoads` (intensity cue) or
+    ``(likelihood, references, used, missing)`` (evidence cue), None for a tile with fewer
+    than ``min_points`` points. A finished tile is written to ``job.results`` (atomically)
+    and taken from there when it is already there."""
+    path = _tile_result_path(job, tile)
+    if path is not None and path.exists():
+        with open(path, "rb") as f:
+            return True, pickle.load(f)
+    cloud = job.store.read(tile)
+    result = None
+    if cloud is not None and len(cloud) >= job.min_points:
+        if job.cue == "intensity":
+            result = extract_tile(cloud, tile, **job.options)
+        else:
+            evidence = road_evidence(cloud, bounds=tile.bounds, references=job.references,
+                                     **job.options)
+            raster = evidence.likelihood
+            result = (GeoRaster(raster.data[None], raster.transform, raster.crs),
+                      evidence.references, evidence.used, evidence.missing)
+    del cloud
+    if path is not None:
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        with open(tmp, "wb") as f:
+            pickle.dump(result, f, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, path)
+    return False, result
+
+
+@lru_cache(maxsize=1)
+def _code_fingerprint() -> str:
+    """Hash of the package's sources and of the libraries' versions: finished tiles of
+    another version of the code are not reused."""
+    import geopandas
+    import scipy
+    import skimage
+    sha = hashlib.sha1()
+    root = Path(__file__).resolve().parents[1]
+    for source in sorted(root.rglob("*.py")):
+        sha.update(str(source.relative_to(root)).encode())
+        sha.update(source.read_bytes())
+    for module in (np, scipy, skimage, shapely, pd, geopandas):
+        sha.update(f"{module.__name__} {module.__version__}".encode())
+    return sha.hexdigest()[:16]
+
+
+def _results_folder(store: TileStore, work_dir, cue: str, options: dict) -> Path | None:
+    """Where the finished tiles of this input, grid, cue and parameters are kept."""
+    if work_dir is None:
+        return None
+    key = digest({"store": store.key, "cue": cue, "options": options,
+                  "code": _code_fingerprint()})
+    folder = Path(work_dir) / f"tiles-{cue}-{key}"
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+def _run_tiles(job: _TileJob, tiles: list[Tile], *, workers: int, scheduler, progress,
+               run: dict) -> list:
+    """Results of ``tiles`` in their order (:func:`gisroads.parallel.run_tasks`)."""
+    outcomes = run_tasks(partial(_run_tile, job), tiles, workers=workers, scheduler=scheduler,
+                         progress=progress)
+    run["tiles"] = run.get("tiles", 0) + len(tiles)
+    run["reused"] = run.get("reused", 0) + sum(reused for reused, _ in outcomes)
+    return [result for _, result in outcomes]
 
 
 def evidence_raster(path, *, tile_m: float = 300.0, overlap_m: float = 100.0,
                     cell_m: float | None = None, min_points: int = 1000,
-                    progress: Progress = None) -> tuple[GeoRaster | None, dict, dict]:
+                    workers: int = 1, scheduler: str | None = None, work_dir=None,
+                    progress: Progress = None, _run: dict | None = None
+                    ) -> tuple[GeoRaster | None, dict, dict]:
     """The road likelihood of a LAS/LAZ file (:func:`gisroads.lidar.evidence.road_evidence`),
     tile by tile, mosaicked from the tiles' cores.
 
-    Every tile is normalised by the references (open-ground density, noise floor, bright
-    intensity) of the first tile holding ``min_points``, so the tiles of one file agree.
+    ``path`` may also be several files, a folder of them or a glob; ``workers``,
+    ``scheduler`` and ``work_dir`` as in :func:`extract_roads`. Every tile is normalised by
+    the references (open-ground density, noise floor, bright intensity) of the first tile
+    holding ``min_points``, so the tiles of one cloud agree.
 
     Returns
     -------
@@ -210,38 +302,55 @@ def evidence_raster(path, *, tile_m: float = 300.0, overlap_m: float = 100.0,
     used, missing : dict
         Cue -> how it was measured, and cue -> why it was left out (first tile).
     """
-    info = las_info(path)
-    tiles = tile_grid(info["extent_m"], tile_m=tile_m, overlap_m=overlap_m,
-                      points_xy=_points_xy(path))
+    store = open_store(path, work_dir, tile_m=tile_m, overlap_m=overlap_m,
+                       progress=scaled(progress, 0.0, 0.1))
+    try:
+        return _evidence_from_store(store, cell_m=cell_m, min_points=min_points,
+                                    workers=workers, scheduler=scheduler, work_dir=work_dir,
+                                    progress=scaled(progress, 0.1, 1.0),
+                                    run={} if _run is None else _run)
+    finally:
+        if work_dir is None:
+            store.remove()
+
+
+def _evidence_from_store(store: TileStore, *, cell_m, min_points, workers, scheduler,
+                         work_dir, progress, run) -> tuple[GeoRaster | None, dict, dict]:
+    tiles = store.tiles
     if cell_m is None:
-        cell_m = auto_cell_m(info["point_count"], _covered_m2(tiles))
-    pieces, references, used, missing = [], None, {}, {}
+        cell_m = auto_cell_m(store.point_count, _covered_m2(tiles))
+    job = _TileJob(store, "evidence", min_points, {"cell_m": cell_m},
+                   _results_folder(store, work_dir, "evidence",
+                                   {"cell_m": cell_m, "min_points": min_points}))
+    # the first tile with enough points gives the references every other tile is scaled by
+    results, first = [], len(tiles)
     for i, tile in enumerate(tiles):
-        report(progress, i / len(tiles), f"tile {i + 1} of {len(tiles)}: road evidence")
-        try:
-            cloud = read_las(path, bbox=tile.bounds)
-        except LasError:
-            continue  # an empty tile
-        if len(cloud) < min_points:
-            continue
-        evidence = road_evidence(cloud, cell_m=cell_m, bounds=tile.bounds,
-                                 references=references)
-        if references is None:
-            references, used, missing = evidence.references, evidence.used, evidence.missing
-        raster = evidence.likelihood
-        pieces.append((tile, GeoRaster(raster.data[None], raster.transform, raster.crs)))
+        report(progress, 0.0, f"tile {i + 1} of {len(tiles)}: references")
+        results.append(_run_tiles(job, [tile], workers=1, scheduler=None, progress=None,
+                                  run=run)[0])
+        if results[-1] is not None:
+            first = i + 1
+            break
+    if first < len(tiles):
+        _, references, _, _ = results[-1]
+        job = replace(job, references=references)
+        results += _run_tiles(job, tiles[first:], workers=workers, scheduler=scheduler,
+                              progress=scaled(progress, first / len(tiles), 1.0), run=run)
     report(progress, 1.0, "road evidence done")
+    pieces = [(tile, r[0]) for tile, r in zip(tiles, results) if r is not None]
     if not pieces:
-        return None, used, missing
+        return None, {}, {}
+    _, _, used, missing = next(r for r in results if r is not None)
     mosaic = mosaic_cores(pieces, cell_m)
     return GeoRaster(mosaic.data[0], mosaic.transform, mosaic.crs), used, missing
 
 
 def _evidence_roads(path, *, threshold: float, network_options: dict | None,
                     progress: Progress, **raster_options) -> LidarRoads:
-    working, source = cloud_crs(path)
+    working, source = inputs_crs(las_inputs(path))
+    run: dict = {}
     likelihood, used, _ = evidence_raster(path, progress=scaled(progress, 0.0, 0.6),
-                                          **raster_options)
+                                          _run=run, **raster_options)
     if likelihood is None:
         network = ribbons_to_network(_no_lines(working), method=EVIDENCE_METHOD)
     else:
@@ -254,7 +363,7 @@ def _evidence_roads(path, *, threshold: float, network_options: dict | None,
         network = RoadNetwork(*(frame.to_crs(source) for frame in (
             network.centrelines, network.polygons, network.junctions)),
             {name: frame.to_crs(source) for name, frame in network.qa.items()})
-    return LidarRoads(network, None, evidence=likelihood, cues=used)
+    return LidarRoads(network, None, evidence=likelihood, cues=used, run=run)
 
 
 def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
@@ -262,19 +371,25 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
                   widths_m=DEFAULT_WIDTHS_M, lengths_m=DEFAULT_LENGTHS_M,
                   n_segments: int = 150, t_planar: float = 0.01, t_vert: float = 0.98,
                   threshold: float = EVIDENCE_THRESHOLD, network_options: dict | None = None,
-                  min_points: int = 1000, progress: Progress = None) -> LidarRoads:
-    """The road network of a LAS/LAZ file, tile by tile.
+                  min_points: int = 1000, workers: int = 1, scheduler: str | None = None,
+                  work_dir=None, progress: Progress = None) -> LidarRoads:
+    """The road network of a point cloud, tile by tile.
+
+    The input is read once: its points are bucketed into the tile grid on disk
+    (:mod:`gisroads.lidar.tilestore`), then every tile reads only its own points.
 
     Parameters
     ----------
-    path : str or Path
+    path : str or Path, or a list of them
+        A LAS/LAZ file, several, a folder of them or a glob (``"tiles/*.laz"``): tiles of
+        one area in one CRS; where files overlap, a tile holds the points of each.
     cue : {"intensity", "evidence"}
         ``intensity``: Zhu & Mordohai's Algorithm 1; ``evidence``: the road likelihood of
         every cue the cloud carries through the network stage (module docstring).
     tile_m, overlap_m : float
         Tile side and overlap with each neighbour, metres (paper: 300 m and 100 m).
     cell_m : float, optional
-        Image cell, metres; by default :func:`auto_cell_m` of the file.
+        Image cell, metres; by default :func:`auto_cell_m` of the cloud.
     threshold : float
         ``cue="evidence"``: likelihood at which a cell is road.
     network_options : dict, optional
@@ -282,13 +397,25 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
         :func:`gisroads.network.rasters.raster_to_network`.
     min_points : int
         Tiles with fewer points are skipped.
+    workers : int
+        Tiles run as tasks on a local Dask cluster of this many single-threaded worker
+        processes; 1 runs them in this process, without Dask.
+    scheduler : str, optional
+        Address of an existing Dask scheduler to run the tiles on instead (its workers
+        must see ``work_dir``).
+    work_dir : str or Path, optional
+        Folder for the tile store and the finished tiles, keyed by the inputs (path, size,
+        modification time) and the parameters: a run stopped midway (Ctrl-C, a power cut)
+        and started again reuses what was finished. By default a temporary folder,
+        removed at the end.
     Other parameters (``cue="intensity"``): see :func:`extract_tile`.
 
     Returns
     -------
     LidarRoads
-        The network in the file's CRS; QA layers ``rectangles`` and ``hypotheses``
+        The network in the cloud's CRS; QA layers ``rectangles`` and ``hypotheses``
         (intensity), ``gap_edges``, ``junction_connections`` and ``rejected`` (evidence).
+        ``run`` counts the tiles and those taken from ``work_dir``.
 
     Raises
     ------
@@ -298,29 +425,30 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
     """
     if cue not in CUES:
         raise ValueError(f"cue must be one of {CUES}, not {cue!r}")
+    parallel = dict(workers=workers, scheduler=scheduler, work_dir=work_dir)
     if cue == "evidence":
         return _evidence_roads(path, threshold=threshold, network_options=network_options,
                                progress=progress, tile_m=tile_m, overlap_m=overlap_m,
-                               cell_m=cell_m, min_points=min_points)
-    info = las_info(path)
-    tiles = tile_grid(info["extent_m"], tile_m=tile_m, overlap_m=overlap_m,
-                      points_xy=_points_xy(path))
-    if cell_m is None:
-        cell_m = auto_cell_m(info["point_count"], _covered_m2(tiles))
-    results = []
-    for i, tile in enumerate(tiles):
-        step = scaled(progress, i / len(tiles), (i + 1) / len(tiles))
-        report(step, 0.0, f"tile {i + 1} of {len(tiles)}: reading")
-        try:
-            cloud = read_las(path, bbox=tile.bounds)
-        except LasError:
-            continue  # an empty tile
-        if len(cloud) < min_points:
-            continue
-        results.append(extract_tile(cloud, tile, cell_m=cell_m, widths_m=widths_m,
-                                    lengths_m=lengths_m, n_segments=n_segments,
-                                    t_planar=t_planar, t_vert=t_vert, progress=step))
-    return assemble(results, crs=cloud_crs(path), cell_m=cell_m)
+                               cell_m=cell_m, min_points=min_points, **parallel)
+    store = open_store(path, work_dir, tile_m=tile_m, overlap_m=overlap_m,
+                       progress=scaled(progress, 0.0, 0.1))
+    try:
+        tiles = store.tiles
+        if cell_m is None:
+            cell_m = auto_cell_m(store.point_count, _covered_m2(tiles))
+        options = dict(cell_m=cell_m, widths_m=tuple(widths_m), lengths_m=tuple(lengths_m),
+                       n_segments=n_segments, t_planar=t_planar, t_vert=t_vert)
+        job = _TileJob(store, "intensity", min_points, options, _results_folder(
+            store, work_dir, "intensity", {**options, "min_points": min_points}))
+        run: dict = {}
+        results = _run_tiles(job, tiles, workers=workers, scheduler=scheduler,
+                             progress=scaled(progress, 0.1, 0.95), run=run)
+        roads = assemble([r for r in results if r is not None], crs=store.crs, cell_m=cell_m)
+        roads.run = run
+        return roads
+    finally:
+        if work_dir is None:
+            store.remove()
 
 
 def _in_core(frame: gpd.GeoDataFrame, tile: Tile) -> gpd.GeoDataFrame:

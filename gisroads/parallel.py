@@ -1,0 +1,109 @@
+"""Independent units of work (LiDAR tiles) in this process or as tasks on Dask.
+
+:func:`run_tasks` calls one function on every item and returns the results in the items'
+order, whatever order they finish in, so an output never depends on the number of workers.
+With ``workers=1`` and no scheduler the items run here, one after another, without Dask
+(QGIS's in-process runs, small inputs); otherwise on a :class:`distributed.LocalCluster` of
+``workers`` single-threaded worker processes, or on the existing cluster at ``scheduler``
+(``tcp://host:8786``): the same job on many machines, with a work folder they all see.
+BLAS and OpenMP pools are pinned to one thread per task (threadpoolctl): a worker per core.
+
+Progress reports the tasks done out of the total and an estimate of the time left.
+"""
+from __future__ import annotations
+
+import os
+import time
+from typing import Callable, Sequence
+
+from .progress import Progress, report
+
+
+def default_workers() -> int:
+    """One worker per core this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def single_threaded(func: Callable, item):
+    """``func(item)`` with the BLAS/OpenMP thread pools pinned to one thread."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
+        return func(item)
+    with threadpool_limits(limits=1):
+        return func(item)
+
+
+def _eta(done: int, total: int, started: float) -> str:
+    if done == 0:
+        return ""
+    left = (time.monotonic() - started) / done * (total - done)
+    minutes, seconds = divmod(int(round(left)), 60)
+    return f", about {minutes}:{seconds:02d} left"
+
+
+def progress_message(done: int, total: int, started: float, what: str = "tiles") -> str:
+    """``"12 of 25 tiles done, about 1:05 left"``."""
+    return f"{done} of {total} {what} done{_eta(done, total, started)}"
+
+
+def run_tasks(func: Callable, items: Sequence, *, workers: int = 1, scheduler: str | None = None,
+              progress: Progress = None, what: str = "tiles") -> list:
+    """``[func(item) for item in items]``, here or on Dask (module docstring).
+
+    Parameters
+    ----------
+    func : callable
+        Picklable (a module-level function or a ``functools.partial`` of one) when run on
+        Dask; it is called with its BLAS threads pinned to one.
+    items : sequence
+    workers : int
+        Worker processes of a local cluster; 1 (with no scheduler) runs in this process.
+    scheduler : str, optional
+        Address of an existing Dask scheduler; ``workers`` is then ignored.
+    progress : callable, optional
+        ``progress(fraction, message)`` after each task; it may raise to cancel, which
+        cancels the tasks not yet finished.
+    """
+    items = list(items)
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, got {workers}")
+    started = time.monotonic()
+    if scheduler is None and (workers == 1 or len(items) <= 1):
+        results = []
+        for i, item in enumerate(items):
+            results.append(single_threaded(func, item))
+            report(progress, (i + 1) / len(items), progress_message(i + 1, len(items),
+                                                                    started, what))
+        return results
+    from distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=min(workers, len(items)), threads_per_worker=1,
+                               processes=True, dashboard_address=None)
+        client = Client(cluster)
+    else:
+        client = Client(scheduler)
+    try:
+        futures = [client.submit(single_threaded, func, item, pure=False) for item in items]
+        index = {f.key: i for i, f in enumerate(futures)}
+        results = [None] * len(items)
+        done = 0
+        try:
+            for future in as_completed(futures):
+                results[index[future.key]] = future.result()
+                done += 1
+                report(progress, done / len(items), progress_message(done, len(items),
+                                                                     started, what))
+        except BaseException:
+            client.cancel(futures)
+            raise
+        return results
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()

@@ -1,0 +1,131 @@
+"""Read once (issue 12, item 1): one streaming pass buckets the points into the tile grid on
+disk; tiles read their points from there; several files, a folder or a glob are one cloud."""
+import laspy
+import numpy as np
+import pytest
+import shapely
+from pyproj import CRS
+
+import gisroads.lidar.tilestore as tilestore
+from gisroads.io.las import LasError, LasPointWriter, read_las
+from gisroads.lidar.pipeline import extract_roads
+from gisroads.lidar.tilestore import las_inputs, open_store
+from gisroads.synthetic import make_scene, write_cloud
+
+
+@pytest.fixture(scope="module")
+def cloud(tmp_path_factory):
+    scene = make_scene(seed=1, size_m=(700.0, 500.0))
+    path = tmp_path_factory.mktemp("store") / "cloud.laz"
+    write_cloud(scene, path, density_per_m2=2.0, seed=1)
+    return path
+
+
+@pytest.fixture(scope="module")
+def split(cloud, tmp_path_factory):
+    """The cloud cut into three files at x = 250 m and 480 m from its west edge."""
+    folder = tmp_path_factory.mktemp("split")
+    las = laspy.read(cloud)
+    x = np.asarray(las.x)
+    cuts = [-np.inf, x.min() + 250, x.min() + 480, np.inf]
+    for i in range(3):
+        part = laspy.LasData(las.header)
+        part.points = las.points[(x >= cuts[i]) & (x < cuts[i + 1])]
+        part.write(folder / f"part_{i}.laz")
+    return folder
+
+
+def _sorted_rows(cloud):
+    rows = np.column_stack([cloud.xyz, cloud.intensity, cloud.classification,
+                            cloud.return_number, cloud.number_of_returns])
+    return rows[np.lexsort(rows.T[::-1])]
+
+
+def test_each_tile_reads_exactly_the_points_inside_its_bounds(cloud, tmp_path):
+    store = open_store(cloud, tmp_path, tile_m=300.0, overlap_m=100.0, chunk_size=50_000)
+    whole = read_las(cloud)
+    assert store.point_count == len(whole)
+    assert len(store.tiles) == 6  # 700 x 500 m: 3 x 2 tiles of 300 m every 200 m
+    for tile in store.tiles:
+        from_store = store.read(tile)
+        direct = read_las(cloud, bbox=tile.bounds)
+        assert len(from_store) == len(direct) > 0
+        np.testing.assert_array_equal(_sorted_rows(from_store), _sorted_rows(direct))
+    # points on the tiles' edges belong to both tiles: a tile spans 2 cells of 200 m
+    assert store.reach == 2
+    # a second opening reuses the finished store
+    again = open_store(cloud, tmp_path, tile_m=300.0, overlap_m=100.0)
+    assert again.folder == store.folder and again.cells == store.cells
+
+
+def test_a_pass_that_fails_midway_leaves_no_store(cloud, tmp_path, monkeypatch):
+    real = tilestore.iter_las_chunks
+
+    def failing(path, **kw):
+        for i, chunk in enumerate(real(path, **kw)):
+            if i == 2:
+                raise KeyboardInterrupt
+            yield chunk
+
+    monkeypatch.setattr(tilestore, "iter_las_chunks", failing)
+    with pytest.raises(KeyboardInterrupt):
+        open_store(cloud, tmp_path, chunk_size=50_000)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_input_is_decoded_once_whatever_the_tile_count(cloud, monkeypatch):
+    reads = []
+    real = tilestore.iter_las_chunks
+
+    def counting(path, **kw):
+        reads.append(path)
+        return real(path, **kw)
+
+    monkeypatch.setattr(tilestore, "iter_las_chunks", counting)
+    roads = extract_roads(cloud, cue="evidence", tile_m=200.0, overlap_m=50.0)
+    assert roads.run["tiles"] == 15  # 5 x 3 tiles of 200 m every 150 m
+    assert len(reads) == 1
+    assert roads.network.centrelines.length.sum() > 2000
+
+
+def test_a_folder_a_glob_and_a_list_of_tiles_give_the_network_of_the_merged_file(
+        cloud, split):
+    merged = extract_roads(cloud, cue="evidence").network
+    files = sorted(split.glob("*.laz"))
+    assert las_inputs(split) == files == las_inputs(str(split / "part_*.laz"))
+    assert las_inputs([files[2], files[0], files[1], files[0]]) == files
+    for source in (split, str(split / "*.laz"), files):
+        network = extract_roads(source, cue="evidence").network
+        assert len(network.centrelines) == len(merged.centrelines) > 10
+        assert shapely.equals_exact(
+            shapely.normalize(shapely.union_all(network.centrelines.geometry.values)),
+            shapely.normalize(shapely.union_all(merged.centrelines.geometry.values)), 1e-6)
+
+
+def test_overlapping_files_each_give_their_points_to_every_tile_holding_them(cloud, split,
+                                                                            tmp_path):
+    # a fourth file repeating the strip 240-260 m: the tiles over it hold both copies
+    las = laspy.read(cloud)
+    x = np.asarray(las.x)
+    strip = (x >= x.min() + 240) & (x < x.min() + 260)
+    extra = laspy.LasData(las.header)
+    extra.points = las.points[strip]
+    extra.write(tmp_path / "strip.laz")
+    store = open_store([split, tmp_path / "strip.laz"], tmp_path / "work")
+    assert store.point_count == len(x) + strip.sum()
+    for tile in store.tiles:
+        inside = ((x >= tile.bounds[0]) & (x <= tile.bounds[2])
+                  & (np.asarray(las.y) >= tile.bounds[1]) & (np.asarray(las.y) <= tile.bounds[3]))
+        assert len(store.read(tile)) == inside.sum() + (inside & strip).sum()
+
+
+def test_inputs_in_different_crs_or_missing_are_refused(cloud, tmp_path):
+    assert read_las(cloud).crs != CRS("EPSG:2154")
+    with LasPointWriter(tmp_path / "other.laz", crs=CRS("EPSG:2154")) as writer:
+        writer.write(np.random.default_rng(0).uniform([0, 0, 0], [10, 10, 1], (100, 3)))
+    with pytest.raises(LasError, match="CRS"):
+        open_store([cloud, tmp_path / "other.laz"], tmp_path / "work")
+    with pytest.raises(LasError, match="no such file"):
+        las_inputs(tmp_path / "missing.laz")
+    with pytest.raises(LasError, match="no LAS/LAZ"):
+        las_inputs(str(tmp_path / "nothing_*.laz"))
