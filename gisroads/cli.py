@@ -8,6 +8,7 @@ output, which still exits 0.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -18,35 +19,72 @@ EPILOG = "Distances are in metres. Outputs are written in the input's CRS."
 
 
 class _ProgressBar:
-    """A one-line progress bar on stderr (a line per 10 % when stderr is not a terminal)."""
+    """Progress on stderr: a tqdm bar on a terminal; elsewhere (a log file, a pipe, CI),
+    where a bar's carriage returns garble the text, one line per 10 %."""
+
+    active: list[_ProgressBar] = []
+    """Bars on screen, closed before an error or a cancel is printed (:func:`main`)."""
 
     def __init__(self, enabled: bool):
         self.enabled = enabled
         self.tty = sys.stderr.isatty()
         self.last = -1
+        self.bar = None
 
     def __call__(self, fraction: float, message: str = "") -> None:
         if not self.enabled:
             return
-        percent = int(fraction * 100)
+        percent = max(0, min(100, int(fraction * 100)))
         if self.tty:
-            bar = "#" * (percent // 4)
-            sys.stderr.write(f"\r[{bar:<25}] {percent:3d}% {message[:40]:<40}")
+            self._draw(percent, message)
             if fraction >= 1.0:
-                sys.stderr.write("\n")
-        elif percent // 10 != self.last // 10 or fraction >= 1.0 and self.last < 100:
-            sys.stderr.write(f"{percent:3d}% {message}\n")
-        else:
+                self.close()
             return
-        self.last = percent
-        sys.stderr.flush()
+        if percent // 10 != self.last // 10 or fraction >= 1.0 and self.last < 100:
+            sys.stderr.write(f"{percent:3d}% {message}\n")
+            sys.stderr.flush()
+            self.last = percent
+
+    def _draw(self, percent: int, message: str) -> None:
+        if self.bar is None:
+            from tqdm import tqdm
+            self.bar = tqdm(total=100, file=sys.stderr, dynamic_ncols=True, leave=True,
+                            bar_format="{percentage:3.0f}%|{bar}| {elapsed}<{remaining} "
+                                       "{desc}")
+            _ProgressBar.active.append(self)
+        self.bar.set_description_str(message[:40], refresh=False)
+        self.bar.update(percent - self.bar.n)  # tqdm takes steps back too
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+            _ProgressBar.active.remove(self)
+
+    @classmethod
+    def close_all(cls) -> None:
+        for bar in list(cls.active):
+            bar.close()
+
+
+def _text(value, key: str = "") -> str:
+    """A result value as a person reads it: floats to 10 significant digits, durations
+    (keys ending in ``_s``) in seconds, a dict as ``name value`` pairs, None as ``none``."""
+    if isinstance(value, dict):
+        return ", ".join(f"{k} {_text(v, key)}" for k, v in value.items())
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_text(v) for v in value) + "]"
+    if isinstance(value, float):
+        return f"{value:.2f} s" if key.endswith("_s") else f"{value:.10g}"
+    return "none" if value is None else str(value)
 
 
 def _print(result: dict, as_json: bool, text: str | None = None) -> None:
     """``result`` as JSON, else ``text`` (by default a ``key: value`` line per item)."""
     if text is None:
-        text = "\n".join(f"{k}: {v}" for k, v in result.items())
+        text = "\n".join(f"{k}: {_text(v, k)}" for k, v in result.items())
     print(to_json(result) if as_json else text)
+    sys.stdout.flush()  # a closed pipe raises here, inside main's handler, not at exit
 
 
 def _size(text: str) -> tuple[float, float]:
@@ -70,12 +108,24 @@ def _positive(text: str) -> float:
 
 def _format_info(info: dict) -> str:
     if info["kind"] == "vector":
-        return "\n".join(f"{l['layer']}: {l['features']} features, {'/'.join(l['geometry'])},"
-                         f" CRS {l['crs']} (EPSG {l['epsg']}), extent {l['extent']}"
-                         for l in info["layers"])
-    skip = {"kind", "path"}
-    return "\n".join([f"{info['path']} ({info['kind']})"] +
-                     [f"  {k}: {v}" for k, v in info.items() if k not in skip])
+        return "\n".join(
+            f"{l['layer']}: {l['features']} features, "
+            f"{'/'.join(l['geometry']) or 'no geometry type'}"
+            f"{' (declared)' if l['geometry'] and not l['features'] else ''}, "
+            f"CRS {l['crs']} (EPSG {l['epsg']}), "
+            + (f"extent {_text(l['extent'])}" if l["extent"] else "no extent")
+            for l in info["layers"])
+    lines = [f"{info['path']} ({info['kind']})"]
+    for key, value in info.items():
+        if key in {"kind", "path"}:
+            continue
+        if key == "georeferenced" and not value:
+            missing = [what for what, there in (("geotransform", info.get("extent")),
+                                                ("CRS", info.get("crs"))) if there is None]
+            value = (f"no (no {' and no '.join(missing)}; give the road commands its pixel "
+                     "size and CRS with --pixel and --crs)")
+        lines.append(f"  {key}: {_text(value)}")
+    return "\n".join(lines)
 
 
 def cmd_info(args) -> int:
@@ -439,10 +489,64 @@ def build_parser() -> argparse.ArgumentParser:
             "Run the imagery pipeline on a bundled SpaceNet Paris tile (scored against its "
             "OpenStreetMap centre lines) and the LiDAR pipeline on a bundled IGN LiDAR HD "
             "tile; write their GeoPackages and PNG quick-looks. Sources and licences: "
-            "data/demo/README.md.")
+            "the README.md beside the data (data/demo/ in the repository, gisroads/_demo/ "
+            "in an installed gisroads).")
     p.add_argument("-o", "--out", type=Path, default=Path("out/demo"), help="output folder")
     add_update_parser(add)
     return parser
+
+
+#: What the output options name: a file with one of these suffixes, or (None) a folder.
+#: ``-o/--out`` names a folder for the commands in _FOLDER_OUT, a GeoPackage for the others.
+_OUTPUTS = {"out": (".gpkg",), "qa": (".gpkg",), "changes": (".gpkg",),
+            "tagged_las": (".las", ".laz"), "attractor": (".tif", ".tiff"),
+            "quicklook": (".png",), "rasters": None, "work_dir": None}
+_FOLDER_OUT = {"synth", "demo"}
+
+
+def check_outputs(args) -> None:
+    """Refuse, before any work, an output a job could only fail to write at its end: a
+    wrong suffix (``-o roads.shp``), a folder where a file goes or a file where a folder
+    goes, or a place that cannot be created or written. Missing folders are created."""
+    for dest, suffixes in _OUTPUTS.items():
+        path = getattr(args, dest, None)
+        if path is None:
+            continue
+        path = Path(path)
+        option = "-o/--out" if dest == "out" else "--" + dest.replace("_", "-")
+        if suffixes is None or dest == "out" and args.command in _FOLDER_OUT:
+            if path.exists() and not path.is_dir():
+                raise ValueError(f"{option} {path}: is a file; give a folder")
+            _check_writable(path, f"{option} {path}")
+            continue
+        if path.suffix.lower() not in suffixes:
+            raise ValueError(f"{option} {path}: must end in {' or '.join(suffixes)}")
+        if path.is_dir():
+            raise ValueError(f"{option} {path}: is a folder; give a file name")
+        _check_writable(path.parent, f"{option} {path}")
+
+
+def _check_writable(folder: Path, what: str) -> None:
+    """``folder`` is a writable folder, or can be made as one in its nearest existing
+    ancestor (``what`` names the option and path in the error)."""
+    existing = folder.absolute()
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{what}: cannot make the folder {folder}: {existing} is a file")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"{what}: cannot write in {existing}: permission denied")
+
+
+def _error_text(err: Exception, args) -> str:
+    """The one-line error, naming the command's own options where it has them."""
+    from .io.raster import NotGeoreferencedError
+    if isinstance(err, NotGeoreferencedError) and hasattr(args, "crs") \
+            and err.path == Path(args.input):
+        return (f"{err.path}: the image has no georeferencing; give its pixel size and "
+                "projected CRS with --pixel METRES --crs CRS (e.g. --pixel 0.3 --crs "
+                "EPSG:32633)")
+    return str(err)
 
 
 def main(argv=None) -> int:
@@ -454,15 +558,25 @@ def main(argv=None) -> int:
     from .progress import Cancelled
     notes = []
     try:
+        check_outputs(args)
         with reported_warnings(notes.append):
             status = args.func(args)
         for note in notes:  # after the progress bar and the result
             print(f"gisroads: warning: {note}", file=sys.stderr)
         return status
+    except BrokenPipeError:
+        # the reader went away (``gisroads info --json f | head``): stop quietly, as a
+        # command killed by SIGPIPE does, and keep Python's exit flush from raising again
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        for stream in (sys.stdout, sys.stderr):
+            os.dup2(devnull, stream.fileno())
+        return 141
     except (LasError, RasterError, ValueError, FileNotFoundError) as err:
-        print(f"gisroads: error: {err}", file=sys.stderr)
+        _ProgressBar.close_all()
+        print(f"gisroads: error: {_error_text(err, args)}", file=sys.stderr)
         return 2
     except (Cancelled, KeyboardInterrupt):
+        _ProgressBar.close_all()
         print("gisroads: cancelled; nothing written", file=sys.stderr)
         return 130
 

@@ -17,7 +17,7 @@ from .geo import CENTRELINES, POLYGONS, GeoRaster, RoadNetwork
 from .io.las import cloud_crs, las_info, read_las
 from .io.quicklook import write_quicklook
 from .io.raster import raster_info, read_raster, write_geotiff
-from .io.vector import list_layers, read_layer, write_geopackage
+from .io.vector import layer_geometry_types, list_layers, read_layer, write_geopackage
 from .progress import Progress, report, scaled, to_json
 from .resources import demo_dir
 from .synthetic import make_scene, render_image, write_cloud
@@ -36,25 +36,43 @@ def parse_metres(text: str, name: str = "value") -> tuple[float, ...]:
     return values
 
 
+def _plain(value):
+    """``value`` with numpy scalars and arrays as Python numbers and lists (JSON and text
+    show ``636001.76``, not ``np.float64(636001.76)``)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in value]
+    return value.item() if isinstance(value, np.generic) else value
+
+
 def describe_file(path) -> dict:
-    """Header facts of a LAS/LAZ, raster or vector file (see ``gisroads info``)."""
+    """Header facts of a LAS/LAZ, raster or vector file (see ``gisroads info``).
+
+    Plain Python values throughout. A GeoPackage layer's ``geometry`` is the types of its
+    features, or for an empty layer the type the file declares for it; a raster without
+    georeferencing has ``georeferenced`` False and no ``extent`` or ``pixel_size``.
+    """
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix in {".las", ".laz"}:
-        return {"kind": "point cloud", **las_info(path)}
+        return _plain({"kind": "point cloud", **las_info(path)})
     if suffix in VECTOR_SUFFIXES:
         names = list_layers(path) if suffix == ".gpkg" else [None]
+        declared = layer_geometry_types(path) if suffix == ".gpkg" else {}
         layers = []
         for name in names:
             frame = read_layer(path, name)
+            found = sorted(set(frame.geom_type.dropna()))
             layers.append({"layer": name or path.stem, "features": len(frame),
-                           "geometry": sorted(set(frame.geom_type.dropna())),
+                           "geometry": found or ([declared[name]] if name in declared
+                                                 else []),
                            "crs": frame.crs.name if frame.crs else None,
                            "epsg": frame.crs.to_epsg() if frame.crs else None,
                            "extent": [float(v) for v in frame.total_bounds] if len(frame)
                            else None})
-        return {"kind": "vector", "path": str(path), "layers": layers}
-    return {"kind": "raster", **raster_info(path)}
+        return _plain({"kind": "vector", "path": str(path), "layers": layers})
+    return _plain({"kind": "raster", **raster_info(path)})
 
 
 def _warn_if_empty(frame: gpd.GeoDataFrame, source, found: str = "road", *,

@@ -5,13 +5,15 @@ size and CRS explicitly, so nothing downstream ever guesses units.
 """
 from __future__ import annotations
 
+import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 import rasterio
 from affine import Affine
 from pyproj import CRS
-from rasterio.errors import RasterioIOError
+from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 
 from ..geo import GeoRaster
 from .vector import atomic_path
@@ -19,6 +21,28 @@ from .vector import atomic_path
 
 class RasterError(ValueError):
     """A raster that cannot be used as given: unreadable, not georeferenced, or all NaN."""
+
+
+class NotGeoreferencedError(RasterError):
+    """An image without georeferencing (a plain PNG/JPEG) given without a pixel size and CRS.
+
+    ``path`` is the image, so a caller can name its own options for them (the command line
+    names ``--pixel`` and ``--crs``)."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        super().__init__(f"{path}: the image has no georeferencing; give its pixel size "
+                         "(metres) and CRS explicitly")
+
+
+@contextmanager
+def _opened(path):
+    """``rasterio.open(path)`` without rasterio's NotGeoreferencedWarning: gisroads checks
+    georeferencing itself and says what to do (:class:`NotGeoreferencedError`)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.open(path) as src:
+            yield src
 
 
 def _crs(rio_crs) -> CRS | None:
@@ -58,7 +82,7 @@ def read_raster(path, *, pixel_size: float | None = None, crs=None,
     if not path.exists():
         raise RasterError(f"{path}: no such file")
     try:
-        with rasterio.open(path) as src:
+        with _opened(path) as src:
             data = src.read(bands)
             transform, file_crs, nodata = src.transform, _crs(src.crs), src.nodata
     except RasterioIOError as err:
@@ -70,8 +94,7 @@ def read_raster(path, *, pixel_size: float | None = None, crs=None,
         transform = Affine(pixel_size, 0, origin[0], 0, -pixel_size, origin[1])
         file_crs = CRS.from_user_input(crs)
     elif not georeferenced:
-        raise RasterError(f"{path}: the image has no georeferencing; give its pixel size "
-                          "(metres) and CRS explicitly")
+        raise NotGeoreferencedError(path)
     if np.issubdtype(data.dtype, np.floating):
         if nodata is not None and not np.isnan(nodata):
             data = np.where(data == nodata, np.nan, data)
@@ -115,17 +138,24 @@ def write_geotiff(path, raster: GeoRaster, *, nodata: float | None = None,
 
 
 def raster_info(path) -> dict:
-    """Header facts of a raster: size, bands, dtype, CRS, pixel size, extent."""
+    """Header facts of a raster: size, bands, dtype, CRS, pixel size, extent.
+
+    A raster without a geotransform (a plain PNG/JPEG) has no pixel size and no extent
+    (None), not GDAL's pixel-grid stand-ins.
+    """
     path = Path(path)
     try:
-        with rasterio.open(path) as src:
+        with _opened(path) as src:
             crs = _crs(src.crs)
+            placed = src.transform != Affine.identity()
             return {"path": str(path), "driver": src.driver, "width": src.width,
                     "height": src.height, "bands": src.count, "dtype": src.dtypes[0],
                     "crs": crs.name if crs else None, "epsg": crs.to_epsg() if crs else None,
-                    "pixel_size": [abs(src.transform.a), abs(src.transform.e)],
-                    "georeferenced": crs is not None and src.transform != Affine.identity(),
-                    "extent": list(src.bounds), "nodata": src.nodata,
+                    "pixel_size": [abs(src.transform.a), abs(src.transform.e)] if placed
+                    else None,
+                    "georeferenced": crs is not None and placed,
+                    "extent": [float(v) for v in src.bounds] if placed else None,
+                    "nodata": None if src.nodata is None else float(src.nodata),
                     "band_names": list(src.descriptions)}
     except RasterioIOError as err:
         raise RasterError(f"{path}: not a readable raster ({err})") from None

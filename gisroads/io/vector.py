@@ -167,7 +167,14 @@ def read_layer(path, layer: str | None = None, *, crs=None) -> gpd.GeoDataFrame:
     if layer is None and path.suffix.lower() == ".gpkg":
         names = list_layers(path)
         layer = "road_centrelines" if "road_centrelines" in names else names[0]
-    frame = gpd.read_file(path, layer=layer) if layer else gpd.read_file(path)
+    try:
+        frame = gpd.read_file(path, layer=layer) if layer else gpd.read_file(path)
+    except Exception as err:  # noqa: BLE001: pyogrio's and Fiona's errors share no base
+        if not type(err).__module__.startswith(("pyogrio", "fiona")):
+            raise
+        raise ValueError(f"{path}: not a readable vector file "
+                         f"({str(err).splitlines()[0] if str(err) else type(err).__name__})"
+                         ) from None
     if crs is not None and len(frame):
         if frame.crs is None:
             raise ValueError(f"{path}: layer has no CRS; cannot reproject it to {crs}")
@@ -186,3 +193,23 @@ def list_layers(path) -> list[str]:
     finally:
         con.close()
     return [r[0] for r in rows]
+
+
+#: GeoPackage geometry type names (``gpkg_geometry_columns``) as the OGC/shapely ones.
+_GPKG_GEOMETRY = {name.upper(): name for name in (
+    "Geometry", "Point", "LineString", "Polygon", "MultiPoint", "MultiLineString",
+    "MultiPolygon", "GeometryCollection")}
+
+
+def layer_geometry_types(path) -> dict[str, str]:
+    """The geometry type each layer of a GeoPackage declares (``LineString`` ...; ``Geometry``
+    for any), whether or not it holds features: what QGIS reads an empty layer as."""
+    con = sqlite3.connect(f"file:{Path(path)}?mode=ro", uri=True)
+    try:
+        rows = con.execute("SELECT table_name, geometry_type_name"
+                           " FROM gpkg_geometry_columns").fetchall()
+    except sqlite3.DatabaseError as err:
+        raise ValueError(f"{path}: not a GeoPackage ({err})") from None
+    finally:
+        con.close()
+    return {table: _GPKG_GEOMETRY.get(kind.upper(), kind) for table, kind in rows}
