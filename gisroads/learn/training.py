@@ -1,0 +1,349 @@
+"""Training pixels for the road model: labelled tiles, the user's road layer, the image itself.
+
+Three sources, each giving balanced, seeded feature samples ``X`` of shape
+``(n_features, n)`` with labels ``y`` for :func:`~gisroads.learn.model.fit_model`
+(training needs scikit-learn; prediction does not):
+
+- :func:`tile_samples`: labelled tiles (the bundled model's ETH/EPFL tiles), each rescaled to
+  several pixel sizes, colour-jittered and partly turned to one grey band, so one model
+  serves 0.3-1.2 m RGB and panchromatic images;
+- :func:`train_from_layer`: an image with an existing road layer over it (the agency case),
+  positives from a core band along the lines, negatives beyond a guard band;
+- :func:`adapt_to_image`: an image and a model, the model's most confident pixels as
+  labels; a second model fitted to them is blended with the first (self-adaptation to an
+  image's sensor, season and pixel size).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import geopandas as gpd
+import numpy as np
+import shapely
+from rasterio import features as rio_features
+from scipy import ndimage
+
+from ..geo import GeoRaster
+from . import features as ft
+from .model import RoadModel, WorkGrid, blend_models, fit_model, work_probability
+
+TRAINING_PIXEL_M = (0.45, 0.6, 0.8, 1.0, 1.2)
+"""Pixel sizes the labelled tiles are rescaled to, metres."""
+
+
+def _sample(mask: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
+    """Up to ``count`` flat indices of True pixels, without replacement."""
+    index = np.flatnonzero(mask)
+    if len(index) <= count:
+        return index
+    return np.sort(rng.choice(index, count, replace=False))
+
+
+def grid_samples(grid: WorkGrid, positive: np.ndarray, negative: np.ndarray, count: int,
+                 rng: np.random.Generator, *, tile_px: int = 512
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Balanced feature samples of a work grid: up to ``count / 2`` positive and as many
+    negative pixels, drawn at random over the whole grid and computed tile by tile.
+
+    Parameters
+    ----------
+    grid : WorkGrid
+    positive, negative : ndarray of bool, shape ``grid.shape``
+        Candidate pixels of each class (invalid pixels are left out).
+    count : int
+        Samples wanted in all.
+
+    Returns
+    -------
+    X : ndarray of float32, shape (n_features, n)
+    y : ndarray of bool, shape (n,)
+    """
+    chosen = np.zeros(grid.shape, np.int8)
+    half = max(1, count // 2)
+    pos = _sample(positive, half, rng)
+    neg = _sample(negative & ~positive, len(pos), rng)
+    chosen.flat[pos], chosen.flat[neg] = 1, 2
+    X, y = [], []
+    for r0, r1, c0, c1 in grid.tiles(tile_px):
+        here = chosen[r0:r1, c0:c1]
+        if not here.any():
+            continue
+        values, valid = grid.features(r0, r1, c0, c1)
+        take = (here > 0) & valid
+        X.append(values[:, take])
+        y.append(here[take] == 1)
+    if not X:
+        return np.empty((len(ft.feature_names()), 0), np.float32), np.empty(0, bool)
+    return np.concatenate(X, axis=1), np.concatenate(y)
+
+
+def _rescale(values: np.ndarray, zoom: float, order: int) -> np.ndarray:
+    """A 2-D array resampled by ``zoom`` (anti-aliased when shrinking)."""
+    values = values.astype(np.float32)
+    if zoom < 1 and order > 0:
+        values = ndimage.gaussian_filter(values, 0.5 * (1 / zoom - 1) + 1e-3)
+    return ndimage.zoom(values, zoom, order=order, mode="nearest", grid_mode=True)
+
+
+def augment(rgb: np.ndarray, road: np.ndarray, source_pixel_m: float, pixel_m: float,
+            rng: np.random.Generator, *, grey: bool) -> tuple[GeoRaster, np.ndarray]:
+    """One augmented copy of a labelled RGB tile.
+
+    The tile is resampled from ``source_pixel_m`` to ``pixel_m``, given a random gamma
+    (0.75-1.33), per-band gains (+-15 %), an offset and noise, and when ``grey`` is set
+    reduced to one band (a random positive mix of R, G, B: panchromatic sensors weigh the
+    bands differently).
+
+    Returns
+    -------
+    image : GeoRaster
+        float32, 3 or 1 band(s), in a local metric CRS at ``pixel_m``.
+    road : ndarray of bool
+        The road mask on the same grid.
+    """
+    from ..imagery.datasets import LOCAL_CRS, local_transform
+
+    zoom = source_pixel_m / pixel_m
+    bands = np.stack([_rescale(b, zoom, 1) for b in np.asarray(rgb, np.float32) / 255.0])
+    mask = _rescale(np.asarray(road, np.float32), zoom, 1) > 0.5
+    gamma = np.exp(rng.uniform(np.log(0.75), np.log(1.33)))
+    gain = rng.uniform(0.85, 1.15, (3, 1, 1))
+    bands = np.clip(bands, 0, 1) ** gamma * gain + rng.uniform(-0.05, 0.05)
+    bands += rng.normal(0, 0.01, bands.shape)
+    if grey:
+        bands = np.tensordot(rng.dirichlet((4, 4, 4)), bands, axes=1)[None]
+    bands = np.clip(bands, 0.0, 1.5).astype(np.float32)
+    return GeoRaster(bands, local_transform(mask.shape, pixel_m), LOCAL_CRS), mask
+
+
+def read_tiles(folder) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The labelled tiles of a folder with ``images/*.png`` and ``groundtruth/*.png`` (the
+    ETH/EPFL layout): ``(rgb uint8 (3, rows, cols), road bool)`` pairs, road = value > 128.
+    """
+    import warnings
+
+    import rasterio
+    from rasterio.errors import NotGeoreferencedWarning
+
+    folder = Path(folder)
+    paths = sorted((folder / "images").glob("*.png"))
+    if not paths:
+        raise FileNotFoundError(f"{folder}: no images/*.png")
+    tiles = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        for path in paths:
+            with rasterio.open(path) as src:
+                rgb = src.read()[:3]
+            with rasterio.open(folder / "groundtruth" / path.name) as src:
+                road = src.read(1) > 128
+            tiles.append((rgb, road))
+    return tiles
+
+
+def tile_samples(tiles, *, source_pixel_m: float = 0.6, pixel_sizes=TRAINING_PIXEL_M,
+                 copies: int = 4, grey_share: float = 0.3, samples_per_copy: int = 600,
+                 border_px: int = 1, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Balanced feature samples of labelled tiles, each augmented ``copies`` times.
+
+    Parameters
+    ----------
+    tiles : sequence of (rgb, road)
+        From :func:`read_tiles`.
+    source_pixel_m : float
+        Pixel size of the tiles, metres.
+    pixel_sizes : sequence of float
+        Each copy is rescaled to one of them at random, metres.
+    copies : int
+        Augmented copies per tile (see :func:`augment`).
+    grey_share : float
+        Share of the copies reduced to one band.
+    samples_per_copy : int
+        Samples per copy, half road.
+    border_px : int
+        Pixels next to the road border (mislabelled in masks) are not sampled.
+    seed : int
+
+    Returns
+    -------
+    X : ndarray of float32, shape (n_features, n)
+    y : ndarray of bool, shape (n,)
+    """
+    rng = np.random.default_rng(seed)
+    X, y = [], []
+    for rgb, road in tiles:
+        for _ in range(copies):
+            pixel_m = float(rng.choice(pixel_sizes))
+            image, mask = augment(rgb, road, source_pixel_m, pixel_m, rng,
+                                  grey=rng.random() < grey_share)
+            grid = WorkGrid(image)
+            positive = ndimage.binary_erosion(mask, iterations=border_px)
+            negative = ~ndimage.binary_dilation(mask, iterations=border_px)
+            xs, ys = grid_samples(grid, positive, negative, samples_per_copy, rng)
+            X.append(xs)
+            y.append(ys)
+    return np.concatenate(X, axis=1), np.concatenate(y)
+
+
+def _road_widths(roads: gpd.GeoDataFrame, width_m, width_field, default_width_m) -> np.ndarray:
+    if width_m is not None:
+        return np.full(len(roads), float(width_m))
+    if width_field is not None:
+        if width_field not in roads.columns:
+            raise ValueError(f"the road layer has no field {width_field!r}")
+        widths = np.asarray(roads[width_field], float)
+        return np.where(np.isfinite(widths) & (widths > 0), widths, default_width_m)
+    return np.full(len(roads), float(default_width_m))
+
+
+def layer_labels(grid: WorkGrid, roads: gpd.GeoDataFrame, *, width_m=None,
+                 width_field: str | None = None, default_width_m: float = 6.0,
+                 guard_m: float = 5.0, core_fraction: float = 0.5
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Positive and negative pixels of a work grid from road centre lines.
+
+    A road of width ``w`` gives positives within ``max(core_fraction * w / 2, pixel)`` of
+    its line and forbids negatives within ``w / 2 + guard_m`` of it (the guard absorbs
+    misregistered lines and kerbs).
+
+    Returns
+    -------
+    positive, negative : ndarray of bool, shape ``grid.shape``
+    """
+    if guard_m < 0 or not 0 < core_fraction <= 1:
+        raise ValueError("guard_m must be >= 0 and core_fraction in (0, 1]")
+    if roads.crs is not None and grid.image.crs is not None:
+        roads = roads.to_crs(grid.image.crs)
+    lines = shapely.force_2d(np.asarray(roads.geometry.values, dtype=object))
+    keep = ~(shapely.is_missing(lines) | shapely.is_empty(lines))
+    kinds = set(shapely.get_type_id(lines[keep]).tolist())
+    if not kinds <= {1, 5}:
+        raise ValueError("the road layer must hold (Multi)LineStrings")
+    widths = _road_widths(roads, width_m, width_field, default_width_m)[keep]
+    lines = lines[keep]
+    if len(lines) == 0:
+        raise ValueError("the road layer has no line")
+    core = shapely.buffer(lines, np.maximum(core_fraction * widths / 2, grid.pixel_m))
+    guard = shapely.buffer(lines, widths / 2 + guard_m)
+
+    def burn(shapes):
+        return rio_features.rasterize(((g, 1) for g in shapes), out_shape=grid.shape,
+                                      transform=grid.transform, fill=0,
+                                      dtype=np.uint8).astype(bool)
+
+    return burn(core), ~burn(guard)
+
+
+def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
+                     width_field: str | None = None, default_width_m: float = 6.0,
+                     guard_m: float = 5.0, core_fraction: float = 0.5,
+                     samples: int = 100_000, base_samples=None, seed: int = 0,
+                     tile_px: int = 512, **fit_params) -> RoadModel:
+    """Train a road model on an image from a road layer over it.
+
+    Parameters
+    ----------
+    image : GeoRaster
+        1-band or 3+-band image in a projected metre CRS.
+    roads : GeoDataFrame
+        Road centre lines (reprojected to the image's CRS); they need not be complete:
+        missing roads fall among the negatives, a few per cent of them.
+    width_m : float, optional
+        One width for every road, metres.
+    width_field : str, optional
+        Field holding each road's width in metres (used when ``width_m`` is None; empty or
+        non-positive values take ``default_width_m``).
+    default_width_m : float
+        Width when neither is given, metres.
+    guard_m : float
+        No negative within ``width / 2 + guard_m`` of a line, metres (OpenStreetMap lines
+        are often 2-5 m off).
+    core_fraction : float
+        Positives within this share of the half-width of a line.
+    samples : int
+        Samples drawn from the image, half road.
+    base_samples : (X, y), optional
+        Samples to train on as well (e.g. :func:`tile_samples` of the default model's
+        tiles).
+    seed : int
+    tile_px : int
+        Work-grid tile side of the feature computation.
+    **fit_params
+        Passed to :func:`~gisroads.learn.model.fit_model`.
+
+    Raises
+    ------
+    ValueError
+        Non-metric image, a layer without lines, bad widths, or no road pixel in the image.
+    """
+    grid = WorkGrid(image)
+    positive, negative = layer_labels(grid, roads, width_m=width_m, width_field=width_field,
+                                      default_width_m=default_width_m, guard_m=guard_m,
+                                      core_fraction=core_fraction)
+    if not positive.any():
+        raise ValueError("no road of the layer lies on the image")
+    rng = np.random.default_rng(seed)
+    X, y = grid_samples(grid, positive, negative, samples, rng, tile_px=tile_px)
+    if base_samples is not None:
+        X = np.concatenate([X, np.asarray(base_samples[0], np.float32)], axis=1)
+        y = np.concatenate([y, np.asarray(base_samples[1], bool)])
+    meta = {"trained_on": "road layer", "guard_m": guard_m, "core_fraction": core_fraction,
+            "default_width_m": default_width_m, "base_samples": base_samples is not None}
+    return fit_model(X, y, seed=seed, metadata=meta, **fit_params)
+
+
+def elongated(mask: np.ndarray, pixel_m: float, *, min_length_m: float = 30.0,
+              max_width_m: float = 20.0) -> np.ndarray:
+    """The connected parts of a mask shaped like roads: a skeleton of at least
+    ``min_length_m`` and a mean width (area over skeleton length) of at most
+    ``max_width_m``."""
+    from skimage.morphology import skeletonize
+
+    label, count = ndimage.label(mask, structure=np.ones((3, 3)))
+    if count == 0:
+        return mask
+    area = np.bincount(label.ravel(), minlength=count + 1) * pixel_m ** 2
+    length = np.bincount(label[skeletonize(mask)], minlength=count + 1) * pixel_m
+    keep = (length >= min_length_m) & (area <= max_width_m * np.maximum(length, 1e-9))
+    keep[0] = False
+    return keep[label]
+
+
+def adapt_to_image(image: GeoRaster, model: RoadModel, *, positive_share: float = 0.04,
+                   negative_share: float = 0.5, road_shaped: bool = False,
+                   samples: int = 40_000,
+                   weight: float = 0.5, seed: int = 0, tile_px: int = 512,
+                   max_iter: int = 60, **fit_params) -> RoadModel:
+    """A model adapted to one image from the model's most confident pixels.
+
+    The ``positive_share`` of the image's valid pixels with the highest probability
+    become road samples, the ``negative_share`` with the lowest non-road samples (shares,
+    not probabilities, so that the choice does not depend on the model's calibration); with
+    ``road_shaped``, only the road samples in connected parts shaped like roads
+    (:func:`elongated`). A model fitted to them is blended with ``model`` (log-odds
+    weighted by ``weight``).
+
+    Returns
+    -------
+    RoadModel
+        The blend; ``model`` itself when the image has too few confident pixels.
+    """
+    grid = WorkGrid(image)
+    probability = work_probability(grid, model, tile_px=tile_px)
+    valid = np.isfinite(probability)
+    if valid.sum() < 100:
+        return model
+    high, low = np.quantile(probability[valid], [1 - positive_share, negative_share])
+    positive = valid & (probability >= high)
+    if road_shaped:
+        positive = elongated(positive, grid.pixel_m)
+    negative = valid & (probability <= low)
+    if positive.sum() < 50 or negative.sum() < 50:
+        return model
+    rng = np.random.default_rng(seed)
+    X, y = grid_samples(grid, positive, negative, samples, rng, tile_px=tile_px)
+    # calibrated like the model it is blended with
+    own = fit_model(X, y, seed=seed, max_iter=max_iter,
+                    road_share=model.metadata.get("calibrated_road_share"),
+                    metadata={"trained_on": "own confident pixels"}, **fit_params)
+    return blend_models(model, own, weight)

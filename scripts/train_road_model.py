@@ -1,0 +1,285 @@
+"""Train the bundled default road model and write its model card (reproducible, seeded).
+
+    OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 .venv/bin/python scripts/train_road_model.py
+
+Trains :func:`gisroads.learn.model.fit_model` on augmented copies of the labelled ETH/EPFL
+tiles in ``../shared/data/training/eth_cil`` (:func:`gisroads.learn.training.tile_samples`),
+writes ``gisroads/learn/models/default_road_model.npz`` and, unless ``--no-evaluate``,
+scores it on the benchmark images of ``../shared/data/imagery`` (held out: never trained on)
+and writes the model card ``default_road_model.md`` beside the model. Needs scikit-learn.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from dataclasses import replace
+
+import numpy as np
+import shapely
+from rasterio import features as rio_features
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from gisroads.evaluate.buffer import buffer_metrics  # noqa: E402
+from gisroads.geo import GeoRaster  # noqa: E402
+from gisroads.imagery.datasets import benchmark_images  # noqa: E402
+from gisroads.learn import features as ft  # noqa: E402
+from gisroads.learn.model import (DEFAULT_MODEL_PATH, fit_model, load_model,  # noqa: E402
+                                  predict_probability, save_model)
+from gisroads.learn.scores import pixel_auc, probability_lines  # noqa: E402
+from gisroads.learn.training import (TRAINING_PIXEL_M, adapt_to_image,  # noqa: E402
+                                     read_tiles, tile_samples, train_from_layer)
+
+TRAINING_DIR = ROOT.parent / "shared" / "data" / "training" / "eth_cil"
+PARAMETERS = dict(max_iter=80, max_leaf_nodes=31, max_depth=6, learning_rate=0.15,
+                  min_samples_leaf=200, l2_regularization=1.0)
+SAMPLING = dict(copies=4, samples_per_copy=600, grey_share=0.3, source_pixel_m=0.6)
+MIN_LINE_M = 10.0
+"""Skeleton lines shorter than this are dropped before the buffer scores, metres."""
+
+
+def _burn(shapes, raster) -> np.ndarray:
+    return rio_features.rasterize(((g, 1) for g in shapes), out_shape=raster.shape,
+                                  transform=raster.transform, fill=0,
+                                  dtype=np.uint8).astype(bool)
+
+
+def model_input(record) -> GeoRaster:
+    """The benchmark image as a user would give it: Massachusetts tiles declare their
+    pure-white fill as no-data (255), so it stays out of the per-image statistics."""
+    if record.dataset != "massachusetts":
+        return record.image
+    return replace(record.image, nodata=255)
+
+
+def score_image(record, model, *, adapt: bool) -> dict:
+    """Pixel AUC and buffer scores of one benchmark image."""
+    start = time.perf_counter()
+    image = model_input(record)
+    used = adapt_to_image(image, model) if adapt else model
+    probability = predict_probability(image, used)
+    seconds = time.perf_counter() - start
+    valid = _burn([record.valid_area], record.image)
+    if record.truth_mask is not None:
+        road, truth_kind = np.asarray(record.truth_mask.data, bool), "mask"
+    else:  # OpenStreetMap lines only: a 3 m band around them
+        road = _burn(shapely.buffer(record.truth.geometry.values, 3.0), record.image)
+        truth_kind = "lines+-3m"
+    lines = probability_lines(probability, threshold=0.5, min_length_m=MIN_LINE_M)
+    scores = buffer_metrics(lines, record.truth, buffer_m=record.buffer_m,
+                            valid_area=record.valid_area)
+    return {"image": record.name, "dataset": record.dataset, "pixel_m": record.pixel_m,
+            "bands": int(np.asarray(record.image.data).shape[0]),
+            "auc": pixel_auc(probability.data, road, valid), "truth": truth_kind,
+            "completeness": scores.completeness, "correctness": scores.correctness,
+            "quality": scores.quality, "seconds": seconds,
+            "pixels": int(np.prod(record.image.shape))}
+
+
+def layer_check(*, share: float = 0.3, seed: int = 0) -> list[dict]:
+    """Training from a road layer (issue 15): on each scored Massachusetts tile, delete
+    ``share`` of the truth lines (seeded), train on the rest of the image's lines, and
+    score the deleted roads: pixel AUC of their mask against pixels beyond the guard band
+    of every road, and completeness of the skeleton of ``probability > 0.5``."""
+    rows = []
+    for record in benchmark_images(datasets=["massachusetts"]):
+        if not record.scored:
+            continue
+        start = time.perf_counter()
+        truth = record.truth
+        rng = np.random.default_rng(seed)
+        deleted = np.zeros(len(truth), bool)
+        deleted[rng.permutation(len(truth))[:max(1, round(share * len(truth)))]] = True
+        image = model_input(record)
+        model = train_from_layer(image, truth[~deleted], width_field="width_m", seed=seed)
+        probability = predict_probability(image, model)
+        lines, width = truth.geometry.values, truth.width_m.to_numpy()
+        kept_zone = _burn(shapely.buffer(lines[~deleted], width[~deleted] / 2 + 2),
+                          record.image)
+        road = np.asarray(record.truth_mask.data, bool) & ~kept_zone & _burn(
+            shapely.buffer(lines[deleted], width[deleted]), record.image)
+        background = ~_burn(shapely.buffer(lines, width / 2 + 5), record.image)
+        valid = _burn([record.valid_area], record.image)
+        found = probability_lines(probability, threshold=0.5, min_length_m=MIN_LINE_M)
+        scores = buffer_metrics(found, truth[deleted], buffer_m=record.buffer_m,
+                                valid_area=record.valid_area)
+        row = {"image": record.name, "deleted_lines": int(deleted.sum()),
+               "deleted_m": float(shapely.length(lines[deleted]).sum()),
+               "auc": pixel_auc(probability.data, road, valid & (road | background)),
+               "completeness": scores.completeness,
+               "seconds": time.perf_counter() - start}
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+    return rows
+
+
+def evaluate(model, *, adapt: bool) -> list[dict]:
+    rows = []
+    for record in benchmark_images():
+        if not record.scored:
+            continue
+        row = score_image(record, model, adapt=adapt)
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+    return rows
+
+
+def _means(rows: list[dict]) -> dict:
+    datasets = sorted({r["dataset"] for r in rows})
+    per = {d: {k: float(np.nanmean([r[k] for r in rows if r["dataset"] == d]))
+               for k in ("auc", "completeness", "correctness", "quality")} for d in datasets}
+    per["mean of images"] = {k: float(np.nanmean([r[k] for r in rows]))
+                             for k in ("auc", "completeness", "correctness", "quality")}
+    per["mean of datasets"] = {k: float(np.nanmean([per[d][k] for d in datasets]))
+                               for k in ("auc", "completeness", "correctness", "quality")}
+    return per
+
+
+def _table(rows: list[dict]) -> str:
+    lines = ["| image | pixel m | bands | pixel AUC | completeness | correctness | quality | "
+             "s |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['image']} | {r['pixel_m']:g} | {r['bands']} | {r['auc']:.3f} "
+                     f"| {r['completeness']:.3f} | {r['correctness']:.3f} "
+                     f"| {r['quality']:.3f} | {r['seconds']:.1f} |")
+    lines += ["", "| dataset | pixel AUC | completeness | correctness | quality |",
+              "|---|---|---|---|---|"]
+    for name, m in _means(rows).items():
+        lines.append(f"| {name} | {m['auc']:.3f} | {m['completeness']:.3f} "
+                     f"| {m['correctness']:.3f} | {m['quality']:.3f} |")
+    return "\n".join(lines)
+
+
+def _layer_table(rows: list[dict]) -> str:
+    lines = ["| image | deleted lines | deleted m | pixel AUC on deleted roads | "
+             "completeness on deleted roads | s |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['image']} | {r['deleted_lines']} | {r['deleted_m']:.0f} "
+                     f"| {r['auc']:.3f} | {r['completeness']:.3f} | {r['seconds']:.0f} |")
+    lines.append(f"| mean | | | {np.mean([r['auc'] for r in rows]):.3f} "
+                 f"| {np.mean([r['completeness'] for r in rows]):.3f} | |")
+    return "\n".join(lines)
+
+
+def write_card(path: Path, model, rows_plain, rows_adapted, train_seconds: float,
+               rows_layer) -> None:
+    meta = model.metadata
+    text = f"""# Default road model (`default_road_model.npz`)
+
+Written by `scripts/train_road_model.py` (seed {meta['parameters']['seed']}); load with
+`gisroads.learn.model.load_model()`, apply with `predict_probability(image)`. Format: the
+numpy archive documented in `gisroads/learn/model.py` (version {meta['format_version']}),
+read without pickle; prediction is numpy only and equals scikit-learn's `predict_proba` of
+the fitted classifier.
+
+## Data
+{meta['data']}. Pixel size assumed {SAMPLING['source_pixel_m']} m. Never trained on the benchmark images
+(`../shared/data/imagery`): the scores below are held out.
+
+Augmentation ({SAMPLING['copies']} copies per tile, {meta['samples']} balanced samples;
+probabilities calibrated to the tiles' road share of {meta['calibrated_road_share']:.2f}):
+each copy rescaled to one of {list(meta['pixel_sizes_m'])} m, random gamma 0.75-1.33, per-band gain +-15 %, offset, noise; {SAMPLING['grey_share']:.0%} of
+the copies reduced to one band (a random mix of R, G, B) for panchromatic images. Pixels
+next to the road border are not sampled.
+
+## Features
+{len(model.feature_names)} per-pixel features in metres (`gisroads/learn/features.py`): on the
+intensity relative to the image's median, Gaussian smoothing, gradient magnitude, Hessian
+eigenvalues and local standard deviation at {list(ft.SCALES_M)} m; saturation,
+chromaticity and excess green of the recorded bands at {list(ft.COLOUR_SCALES_M)} m;
+contrast to a {ft.CONTEXT_M:g} m box mean; the intensity itself; oriented line means over
+{ft.LINE_M:g} m in {ft.ORIENTATIONS} directions (homogeneity along the line, contrast to
+parallel lines {list(ft.LINE_OFFSETS_M)} m to either side). Images finer than 0.45 m are
+block-averaged to about {ft.WORK_PIXEL_M} m first.
+
+## Classifier
+scikit-learn `HistGradientBoostingClassifier` ({meta['sklearn']}), {json.dumps(meta['parameters'])},
+early stopping off; {model.n_trees} trees, {len(model.feature)} nodes, depth {model.depth}.
+Training took {train_seconds:.0f} s on one core.
+
+## Held-out scores (benchmark images)
+Pixel AUC against the truth masks (Paris: a 3 m band around its OpenStreetMap lines);
+completeness / correctness / quality of the skeleton of `probability > 0.5` (lines under
+{MIN_LINE_M:g} m dropped) against the truth lines with each image's buffer, in its valid
+area. The probabilities are calibrated to the training tiles' road share (about 20 %), so
+0.5 is a strict threshold (correctness over completeness); the shape and network stages
+are what should turn the raster into roads. `s` is the prediction time on one core of a
+shared (loaded) machine.
+
+### This model alone
+{_table(rows_plain)}
+"""
+    if rows_adapted:
+        text += f"""
+### With self-adaptation (`gisroads.learn.training.adapt_to_image`)
+The top 4 % of each image's pixels by this model's probability as road, its lowest 50 % as
+non-road, a 60-tree model fitted to 40 000 of them and blended half and half (log-odds)
+with this one (needs scikit-learn at prediction time; the times include the fit).
+
+{_table(rows_adapted)}
+"""
+    if rows_layer:
+        text += f"""
+## Training from a road layer (`train_from_layer`, not this model)
+On each scored Massachusetts tile, 30 % of the truth lines deleted (seed 0), a model trained
+from the image and the remaining lines (their mask widths, guard 5 m, 100 000 samples),
+scored on the deleted roads: pixel AUC of their mask against pixels more than 5 m beyond
+every road, and completeness of the skeleton of `probability > 0.5` against the deleted
+lines (buffer 4 m).
+
+{_layer_table(rows_layer)}
+"""
+    path.write_text(text)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--training", type=Path, default=TRAINING_DIR)
+    parser.add_argument("--out", type=Path, default=DEFAULT_MODEL_PATH)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-evaluate", action="store_true")
+    parser.add_argument("--no-adapt", action="store_true",
+                        help="skip the self-adapted evaluation")
+    parser.add_argument("--evaluate-only", action="store_true",
+                        help="score the model at --out without training")
+    parser.add_argument("--layer-check", action="store_true",
+                        help="also train from 70 %% of each Massachusetts tile's roads and "
+                             "score the other 30 %%")
+    args = parser.parse_args(argv)
+    import sklearn
+
+    if args.evaluate_only:
+        model, train_seconds = load_model(args.out), float("nan")
+    else:
+        start = time.perf_counter()
+        tiles = read_tiles(args.training)
+        X, y = tile_samples(tiles, seed=args.seed, **SAMPLING)
+        meta = {"data": f"{len(tiles)} labelled 400x400 RGB tiles of "
+                        f"{args.training.name} (ETH Zurich CIL / EPFL road segmentation set, "
+                        "mhamas/road-extraction-from-aerial-images @2be7759, no licence "
+                        "stated; see ../shared/data/training/README.md)",
+                "pixel_sizes_m": list(TRAINING_PIXEL_M),
+                "sampling": SAMPLING, "sklearn": sklearn.__version__, "format_version": 1}
+        share = float(np.mean([road.mean() for _, road in tiles]))
+        model = fit_model(X, y, seed=args.seed, metadata=meta, road_share=share,
+                          **PARAMETERS)
+        train_seconds = time.perf_counter() - start
+        save_model(model, args.out)
+        print(f"trained in {train_seconds:.0f} s: {model.n_trees} trees, "
+              f"{args.out.stat().st_size / 1e3:.0f} kB", flush=True)
+    if args.no_evaluate:
+        return 0
+    plain = evaluate(model, adapt=False)
+    adapted = [] if args.no_adapt else evaluate(model, adapt=True)
+    layer = layer_check() if args.layer_check else []
+    write_card(args.out.with_suffix(".md"), model, plain, adapted, train_seconds, layer)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

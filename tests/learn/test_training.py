@@ -1,0 +1,73 @@
+"""Training from a road layer finds the roads left out of it; self-adaptation."""
+import geopandas as gpd
+import numpy as np
+import pytest
+import shapely
+from rasterio import features as rio_features
+
+from gisroads.learn.model import WorkGrid, predict_probability
+from gisroads.learn.scores import pixel_auc
+from gisroads.learn.training import adapt_to_image, layer_labels, train_from_layer
+
+pytest.importorskip("sklearn")
+
+HELD_OUT_AUC_MIN = 0.93  # measured 0.982
+
+
+def _burn(geoms, image):
+    return rio_features.rasterize(((g, 1) for g in geoms), out_shape=image.shape,
+                                  transform=image.transform, fill=0, dtype=np.uint8) > 0
+
+
+def test_model_from_70_percent_of_the_roads_finds_the_other_30(scene_image):
+    scene, image = scene_image
+    roads = scene.roads[~scene.roads.bridge.to_numpy()].reset_index(drop=True)
+    rng = np.random.default_rng(0)
+    held = np.zeros(len(roads), bool)
+    held[rng.permutation(len(roads))[:max(1, round(0.3 * len(roads)))]] = True
+    model = train_from_layer(image, roads[~held], width_field="width_m", samples=20000,
+                             max_iter=60, seed=0)
+    probability = predict_probability(image, model).data
+    lines, width = roads.geometry.values, roads.width_m.to_numpy()
+    kept_area = _burn(shapely.buffer(lines[~held], width[~held] / 2 + 2), image)
+    held_road = _burn(shapely.buffer(lines[held], width[held] / 2 - 0.5), image) & ~kept_area
+    background = ~_burn(shapely.buffer(scene.roads.geometry.values,
+                                       scene.roads.width_m.to_numpy() / 2 + 5), image)
+    auc = pixel_auc(probability, held_road, held_road | background)
+    print(f"held-out roads: {held_road.sum()} px, pixel AUC {auc:.3f}")
+    assert held_road.sum() > 2000
+    assert auc > HELD_OUT_AUC_MIN
+
+
+def test_layer_labels_core_and_guard(scene_image):
+    scene, image = scene_image
+    grid = WorkGrid(image)
+    positive, negative = layer_labels(grid, scene.roads, width_m=8.0, guard_m=5.0)
+    assert not (positive & negative).any()
+    # positives: a 2 m band either side of the lines, negatives beyond 4 + 5 m
+    x, y = grid.transform.c + 0.5 * grid.pixel_m, grid.transform.f - 0.5 * grid.pixel_m
+    cols, rows = np.meshgrid(np.arange(grid.shape[1]), np.arange(grid.shape[0]))
+    points = shapely.points(x + cols * grid.pixel_m, y - rows * grid.pixel_m)
+    distance = shapely.distance(points, shapely.union_all(scene.roads.geometry.values))
+    assert distance[positive].max() < 2.0 + grid.pixel_m
+    assert distance[negative].min() > 9.0 - grid.pixel_m
+
+
+def test_bad_road_layers_are_refused(scene_image):
+    scene, image = scene_image
+    points = gpd.GeoDataFrame(geometry=[shapely.Point(500100, 4500100)], crs=scene.crs)
+    with pytest.raises(ValueError, match="LineString"):
+        train_from_layer(image, points)
+    with pytest.raises(ValueError, match="no field"):
+        train_from_layer(image, scene.roads, width_field="lanes")
+    far = gpd.GeoDataFrame(geometry=[shapely.LineString([(0, 0), (100, 0)])], crs=scene.crs)
+    with pytest.raises(ValueError, match="no road"):
+        train_from_layer(image, far)
+
+
+def test_adaptation_blends_a_model_of_the_image(scene_image, scene_model):
+    _, image = scene_image
+    adapted = adapt_to_image(image, scene_model, samples=6000, max_iter=20)
+    assert adapted.n_trees == scene_model.n_trees + 20
+    probability = predict_probability(image, adapted).data
+    assert np.nanmin(probability) >= 0 and np.nanmax(probability) <= 1
