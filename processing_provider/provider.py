@@ -7,7 +7,7 @@ from pathlib import Path
 from qgis.core import QgsProcessingModelAlgorithm, QgsProcessingProvider
 
 from . import algorithms
-from .algorithms.base import GisroadsAlgorithm
+from .algorithms.base import GisroadsAlgorithm, show_decimals
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 
@@ -41,4 +41,6 @@ class GisroadsProvider(QgsProcessingProvider):
             model = QgsProcessingModelAlgorithm()
             if not model.fromFile(str(path)):
                 raise RuntimeError(f"{path}: not a Processing model")
+            for parameter in model.parameterDefinitions():
+                show_decimals(parameter)  # as the algorithms' own (GisroadsAlgorithm)
             self.addAlgorithm(model)

@@ -1,19 +1,27 @@
-"""What every gisroads algorithm shares: group, translation hook, instance creation, help."""
+"""What every gisroads algorithm shares: group, translation hook, instance creation, help,
+stage numbers in the toolbox and the decimals of number parameters."""
+import math
 import re
 
 from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutputNumber,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
-                       QgsProcessingParameterFileDestination)
+                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber)
 from qgis.PyQt.QtCore import QCoreApplication
 
 
 class GisroadsAlgorithm(QgsProcessingAlgorithm):
-    """Subclasses set ``NAME``, ``DISPLAY_NAME``, ``GROUP`` and ``HELP`` (HTML)."""
+    """Subclasses set ``NAME``, ``DISPLAY_NAME``, ``GROUP`` and ``HELP`` (HTML), and a
+    stage of a method's pipeline its ``STAGE``."""
 
     NAME = ""
     DISPLAY_NAME = ""
     GROUP = ""
     HELP = ""
+    STAGE = 0
+    """Place of a stage algorithm in its group's pipeline (1, 2, ...), put before its display
+    name ("1 Ground planes and intensity image"): the toolbox sorts by name, so the stages
+    show in pipeline order, ahead of the whole pipelines and tools (0: no number). The
+    algorithm's id (``NAME``) carries no number and never changes."""
 
     def tr(self, text):
         return QCoreApplication.translate("gisroads", text)
@@ -22,7 +30,8 @@ class GisroadsAlgorithm(QgsProcessingAlgorithm):
         return self.NAME
 
     def displayName(self):  # noqa: N802
-        return self.tr(self.DISPLAY_NAME)
+        name = self.tr(self.DISPLAY_NAME)
+        return f"{self.STAGE} {name}" if self.STAGE else name
 
     def group(self):
         return self.tr(self.GROUP)
@@ -40,6 +49,12 @@ class GisroadsAlgorithm(QgsProcessingAlgorithm):
 
     def createInstance(self):  # noqa: N802
         return type(self)()
+
+    def addParameter(self, parameter, createOutput=True):  # noqa: N802
+        """QGIS's addParameter; a decimal number parameter first gets the decimals its
+        values need (:func:`show_decimals`)."""
+        show_decimals(parameter)
+        return super().addParameter(parameter, createOutput)
 
     def add_parameters(self, params) -> None:
         """Add ``(parameter, help text)`` pairs; a help of None leaves the parameter's own."""
@@ -61,6 +76,36 @@ class GisroadsAlgorithm(QgsProcessingAlgorithm):
                           f"{result['junctions']} junctions{detail}")
         return {"ROADS": result["roads"], "LENGTH_M": result["length_m"],
                 "JUNCTIONS": result["junctions"]}
+
+
+def _decimals(value: float) -> int:
+    """Decimals ``value`` needs, up to 6 (29.999999999999996 needs none)."""
+    return len(f"{value:.6f}".rstrip("0").split(".")[1])
+
+
+def number_decimals(parameter: QgsProcessingParameterNumber) -> int:
+    """Decimals a number parameter's spin box shows: as many as its default, minimum and
+    maximum need, at least 1, and at least 2 for values below 1 (shares, thresholds,
+    cells) so they can be tuned by hundredths; at most 6."""
+    values = [float(v) for v in (parameter.defaultValue(), parameter.minimum(),
+                                 parameter.maximum())
+              if isinstance(v, (int, float)) and math.isfinite(v) and abs(v) < 1e15]
+    needed = max((_decimals(v) for v in values), default=0)
+    return min(6, max(needed, 2 if any(0 < abs(v) < 1 for v in values) else 1))
+
+
+def show_decimals(parameter) -> None:
+    """Set the decimals a decimal number parameter shows in the algorithm dialog (QGIS's
+    ``widget_wrapper`` metadata; QGIS shows 6 by default: "300.000000"), unless set."""
+    if not isinstance(parameter, QgsProcessingParameterNumber) \
+            or parameter.dataType() != QgsProcessingParameterNumber.Double:
+        return
+    metadata = parameter.metadata()
+    wrapper = dict(metadata.get("widget_wrapper") or {})
+    if "decimals" not in wrapper:
+        wrapper["decimals"] = number_decimals(parameter)
+        metadata["widget_wrapper"] = wrapper
+        parameter.setMetadata(metadata)
 
 
 def cloud_input(tr, text: str) -> QgsProcessingParameterFile:

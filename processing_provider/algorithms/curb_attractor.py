@@ -46,6 +46,7 @@ class CurbAttractorMap(GisroadsAlgorithm):
     NAME = "curbattractormap"
     DISPLAY_NAME = "Curb attractor map"
     GROUP = "Map-guided snakes"
+    STAGE = 2
     HELP = (
         "<p>Builds the attractor map of Boyko &amp; Funkhouser's map-guided road extraction "
         "(section 2.3) along an approximate road map over a LAS/LAZ point cloud: the map is "

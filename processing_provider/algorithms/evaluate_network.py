@@ -1,8 +1,7 @@
 """Evaluate road network: buffer, topology, path-length and area scores against a reference."""
 from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutputNumber,
-                       QgsProcessingOutputString, QgsProcessingParameterDistance,
-                       QgsProcessingParameterFeatureSink, QgsProcessingParameterFeatureSource,
-                       QgsProcessingParameterNumber)
+                       QgsProcessingOutputString, QgsProcessingParameterFeatureSink,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber)
 
 from gisroads.evaluate import evaluate_network, format_report, match_layers
 from gisroads.progress import to_json
@@ -42,11 +41,14 @@ class EvaluateRoadNetwork(GisroadsAlgorithm):
             "EXTRACTED", self.tr("Extracted road centre lines"), lines))
         self.addParameter(QgsProcessingParameterFeatureSource(
             "REFERENCE", self.tr("Reference road centre lines"), lines))
-        self.addParameter(QgsProcessingParameterDistance(
-            "BUFFER", self.tr("Buffer width (about half a carriageway)"), 3.0, "REFERENCE",
+        # metres in any CRS (the scores work in metres), so numbers, not distances in the
+        # layer's units, which QGIS shows as "<unknown>" until a layer is chosen
+        double = QgsProcessingParameterNumber.Double
+        self.addParameter(QgsProcessingParameterNumber(
+            "BUFFER", self.tr("Buffer width (metres; about half a carriageway)"), double, 3.0,
             minValue=0.01))
-        self.addParameter(QgsProcessingParameterDistance(
-            "JUNCTION_RADIUS", self.tr("Junction matching radius"), 10.0, "REFERENCE",
+        self.addParameter(QgsProcessingParameterNumber(
+            "JUNCTION_RADIUS", self.tr("Junction matching radius (metres)"), double, 10.0,
             minValue=0.01))
         self.addParameter(QgsProcessingParameterFeatureSource(
             "EXTRACTED_POLYGONS", self.tr("Extracted road polygons (for area scores)"),

@@ -16,6 +16,7 @@ class ImageSegmentation(GisroadsAlgorithm):
     NAME = "imagesegmentation"
     DISPLAY_NAME = "NCut segmentation (imagery)"
     GROUP = "Imagery"
+    STAGE = 1
     HELP = (
         "<p>Over-segments an aerial image with normalized cuts, the first stage of Grote "
         "&amp; Rottensteiner's road extraction (2010, Sec. 2.1.1): segment borders should "

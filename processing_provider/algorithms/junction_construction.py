@@ -21,6 +21,7 @@ class JunctionConstruction(GisroadsAlgorithm):
     NAME = "junctionconstruction"
     DISPLAY_NAME = "Junction construction and network generation"
     GROUP = "Imagery"
+    STAGE = 5
     HELP = (
         "<p>Connects road strings (the output of subgraph linking, or any line layer) into "
         "a road network, following Grote &amp; Rottensteiner (2010, Sec. 2.3).</p>"

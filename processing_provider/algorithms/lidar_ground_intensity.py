@@ -12,6 +12,7 @@ class LidarGroundIntensity(GisroadsAlgorithm):
     NAME = "lidargroundintensity"
     DISPLAY_NAME = "Ground planes and intensity image"
     GROUP = "LiDAR"
+    STAGE = 1
     HELP = (
         "<p>Finds the ground of an airborne LiDAR point cloud on one or more levels and "
         "projects the intensity of each level's ground points to an image (Zhu &amp; "

@@ -16,6 +16,7 @@ class LidarLikelihood(GisroadsAlgorithm):
     NAME = "lidarlikelihood"
     DISPLAY_NAME = "Road likelihood maps"
     GROUP = "LiDAR"
+    STAGE = 3
     HELP = (
         "<p>Rectangular road hypotheses on one level of a LiDAR intensity image and the road "
         "likelihood map of every window width (Zhu &amp; Mordohai, section 4.3, Eq. 5). "

@@ -17,6 +17,7 @@ class LidarMinCover(GisroadsAlgorithm):
     NAME = "lidarmincover"
     DISPLAY_NAME = "Minimum-cover road rectangles"
     GROUP = "LiDAR"
+    STAGE = 4
     HELP = (
         "<p>Selects the fewest, most likely rectangles that explain the road likelihood "
         "(Zhu &amp; Mordohai, section 4.4, Algorithm 2): seeds are sampled along the centre "

@@ -12,6 +12,7 @@ class RectanglesToNetwork(GisroadsAlgorithm):
     NAME = "rectanglestonetwork"
     DISPLAY_NAME = "Rectangles to centre lines and polygons"
     GROUP = "LiDAR"
+    STAGE = 5
     HELP = (
         "<p>Turns road rectangles into a road network: each rectangle's mid-line is its "
         "centre line; centre lines of overlapping or abutting rectangles that continue each "

@@ -22,6 +22,7 @@ class LidarSegmentation(GisroadsAlgorithm):
     NAME = "lidarsegmentation"
     DISPLAY_NAME = "Edges and NCut segmentation (LiDAR)"
     GROUP = "LiDAR"
+    STAGE = 2
     HELP = (
         "<p>Edge strength and orientation of one level of a LiDAR intensity image by local "
         "energy (Morrone &amp; Owens: quadrature pairs of oriented filters), and its "

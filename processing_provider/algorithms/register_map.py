@@ -13,6 +13,7 @@ class RegisterRoadMap(GisroadsAlgorithm):
     NAME = "registerroadmap"
     DISPLAY_NAME = "Register road map to point cloud"
     GROUP = "Map-guided snakes"
+    STAGE = 1
     HELP = (
         "<p>Lifts an approximate 2D road map (OpenStreetMap lines, a digitised network; any "
         "CRS, reprojected to the cloud's) onto a LAS/LAZ point cloud, as the first step of "

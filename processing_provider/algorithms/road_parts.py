@@ -76,6 +76,7 @@ class RoadPartFiltering(GisroadsAlgorithm):
     NAME = "roadparts"
     DISPLAY_NAME = "Road-part shape filtering"
     GROUP = "Imagery"
+    STAGE = 3
     HELP = (
         "<p>Tests every segment of an image segmentation against the road-part criteria of "
         "Grote &amp; Rottensteiner (2010, Sec. 2.1.3) with the parameters of Grote et al. "

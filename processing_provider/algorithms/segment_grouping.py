@@ -27,6 +27,7 @@ class SegmentGrouping(GisroadsAlgorithm):
     NAME = "segmentgrouping"
     DISPLAY_NAME = "Segment grouping"
     GROUP = "Imagery"
+    STAGE = 2
     HELP = (
         "<p>Merges adjacent segments of an over-segmentation (e.g. from <i>NCut "
         "segmentation (imagery)</i>, possibly edited) into larger segments, following "

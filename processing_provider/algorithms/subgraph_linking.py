@@ -19,6 +19,7 @@ class SubgraphLinking(GisroadsAlgorithm):
     NAME = "subgraphlinking"
     DISPLAY_NAME = "Subgraph linking (integer program)"
     GROUP = "Imagery"
+    STAGE = 4
     HELP = (
         "<p>Links road parts (centre lines from the road-part shape filtering) into road "
         "strings, following Grote &amp; Rottensteiner (2010, Sec. 2.2).</p>"

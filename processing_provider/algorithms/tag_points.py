@@ -12,6 +12,7 @@ class TagRoadPoints(GisroadsAlgorithm):
     NAME = "tagroadpoints"
     DISPLAY_NAME = "Tag road points"
     GROUP = "LiDAR"
+    STAGE = 6
     HELP = (
         "<p>Writes a copy of a LAS/LAZ point cloud whose road-surface points are classified "
         "11 (road surface), every other attribute unchanged.</p>"
