@@ -180,13 +180,17 @@ def _then_compare(args, result: dict) -> dict:
 
 def cmd_lidar(args) -> int:
     from .jobs import lidar_job
+    from .parallel import default_workers
     options = dict(cue=args.cue, cell_m=args.cell, tile_m=args.tile, overlap_m=args.overlap,
-                   n_segments=args.segments, threshold=args.threshold)
+                   n_segments=args.segments, threshold=args.threshold,
+                   workers=args.workers or default_workers(), scheduler=args.scheduler,
+                   work_dir=args.work_dir)
     if args.widths:
         options["widths_m"] = args.widths
     if args.lengths:
         options["lengths_m"] = args.lengths
-    result = lidar_job(args.input, args.out, tagged_las=args.tagged_las,
+    source = args.input[0] if len(args.input) == 1 else args.input
+    result = lidar_job(source, args.out, tagged_las=args.tagged_las,
                        rasters_dir=args.rasters, quicklook=args.quicklook,
                        progress=_ProgressBar(not args.json), **options)
     _print(_then_compare(args, result), args.json)
@@ -375,7 +379,20 @@ def build_parser() -> argparse.ArgumentParser:
             "filters, per-width likelihood maps and a minimum cover of the hypotheses. "
             "Writes road centre lines with widths, road polygons, junctions and the QA "
             "layers rectangles and hypotheses to a GeoPackage in the cloud's CRS.")
-    add_source_and_out(p, "input", "LAS/LAZ point cloud with intensity")
+    p.add_argument("input", nargs="+", help="LAS/LAZ point cloud with intensity; or several "
+                   "files, a folder of them or a quoted glob ('tiles/*.laz'): tiles of one "
+                   "area in one CRS, read as one cloud")
+    p.add_argument("-o", "--out", type=Path, required=True, help="output GeoPackage (.gpkg)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="tiles in parallel on a local Dask cluster of N worker processes "
+                        "(default: one per core; 1 runs them in this process)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run the tiles on an existing Dask cluster (e.g. tcp://host:8786); "
+                        "its workers must see --work-dir")
+    p.add_argument("--work-dir", type=Path, metavar="DIR",
+                   help="keep the points bucketed by tile and the finished tiles here: a "
+                        "stopped run started again resumes where it was (default: a "
+                        "temporary folder, removed at the end)")
     p.add_argument("--cue", choices=("intensity", "evidence"), default="intensity",
                    help="intensity: the paper's rectangles on the ground intensity "
                         "(default); evidence: the road likelihood of every cue the cloud "

@@ -79,7 +79,12 @@ def run_tasks(func: Callable, items: Sequence, *, workers: int = 1, scheduler: s
             report(progress, (i + 1) / len(items), progress_message(i + 1, len(items),
                                                                     started, what))
         return results
-    from distributed import Client, LocalCluster, as_completed
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise ValueError("running tiles on several workers or a scheduler needs Dask "
+                         "(pip install 'dask[distributed]', or Debian's python3-distributed);"
+                         " use one worker") from None
 
     cluster = None
     if scheduler is None:
