@@ -243,16 +243,22 @@ def _run_tile(job: _TileJob, tile: Tile):
     return False, result
 
 
+#: The sources a tile's result depends on (relative to the package).
+_TILE_SOURCES = ("lidar/*.py", "features/*.py", "segmentation/ncut.py", "vectorize/*.py",
+                 "optimize*", "evaluate/topology.py", "geo.py", "io/las.py")
+
+
 @lru_cache(maxsize=1)
 def _code_fingerprint() -> str:
-    """Hash of the package's sources and of the libraries' versions: finished tiles of
+    """Hash of the sources a tile runs and of the libraries' versions: finished tiles of
     another version of the code are not reused."""
     import geopandas
     import scipy
     import skimage
     sha = hashlib.sha1()
     root = Path(__file__).resolve().parents[1]
-    for source in sorted(root.rglob("*.py")):
+    sources = {p for pattern in _TILE_SOURCES for p in root.glob(pattern) if p.is_file()}
+    for source in sorted(sources):
         sha.update(str(source.relative_to(root)).encode())
         sha.update(source.read_bytes())
     for module in (np, scipy, skimage, shapely, pd, geopandas):
