@@ -10,5 +10,15 @@ if os.path.isdir(os.path.join(_PLUGIN_DIR, "gisroads")) and _PLUGIN_DIR not in s
 
 
 def classFactory(iface):  # noqa: N802 (QGIS's name)
-    from .plugin import GisroadsPlugin
+    """The plugin; when the algorithms' Python packages are missing or do not import, a
+    stand-in that says so in one message (no traceback, no provider)."""
+    from .dependencies import load_error_message, missing_message, missing_requirements
+    from .plugin import GisroadsPlugin, UnavailablePlugin
+    missing = missing_requirements()
+    if missing:
+        return UnavailablePlugin(iface, missing_message(missing))
+    try:
+        from . import provider  # noqa: F401: imports gisroads and every dependency
+    except Exception as error:  # noqa: BLE001: any import failure is reported, not raised
+        return UnavailablePlugin(iface, load_error_message(error))
     return GisroadsPlugin(iface)

@@ -1,0 +1,85 @@
+"""The Python packages the gisroads algorithms need, checked before any of them is imported.
+
+QGIS runs plugins in its own Python (Debian 12: /usr/bin/python3, whose shapely is 1.8 and
+which has no laspy or lazrs). Importing gisroads there fails deep inside shapely or laspy
+with a traceback; this module looks at the installed versions first (package metadata, no
+import) so the plugin can say in one message what is missing and how to fix it.
+Standard library only: it must import in any QGIS.
+"""
+from __future__ import annotations
+
+import importlib.metadata
+import importlib.util
+import re
+import sys
+
+#: (module, distribution, minimum version): pyproject.toml's dependencies that the
+#: algorithms import (not needed inside QGIS: scikit-learn trains the learned cue, dask runs
+#: LiDAR tiles on a cluster, imported only then, tqdm draws the command line's progress bar).
+REQUIREMENTS = [
+    ("numpy", "numpy", "1.24"),
+    ("scipy", "scipy", "1.10"),
+    ("skimage", "scikit-image", "0.19"),
+    ("shapely", "shapely", "2.0"),
+    ("geopandas", "geopandas", "0.12"),
+    ("pyproj", "pyproj", "3.4"),
+    ("rasterio", "rasterio", "1.3"),
+    ("pulp", "pulp", "2.6"),
+    ("laspy", "laspy", "2.4"),
+    ("lazrs", "lazrs", "0.5"),
+    ("matplotlib", "matplotlib", "3.6"),
+]
+
+
+def _release(version: str) -> tuple[int, ...]:
+    """The leading numbers of a version ("2.0.1" -> (2, 0, 1), "1.24.2rc1" -> (1, 24, 2))."""
+    return tuple(int(part) for part in re.findall(r"\d+", version.split("+")[0])[:3])
+
+
+def installed_version(module: str, distribution: str) -> str | None:
+    """The installed version of a package, None when it is not importable."""
+    if importlib.util.find_spec(module) is None:
+        return None
+    try:
+        return importlib.metadata.version(distribution)
+    except importlib.metadata.PackageNotFoundError:  # a build without metadata
+        try:
+            return str(getattr(importlib.import_module(module), "__version__", "0"))
+        except Exception:  # noqa: BLE001: an import that fails is a missing package
+            return None
+
+
+def missing_requirements(requirements=REQUIREMENTS) -> list[str]:
+    """One entry per unmet requirement: ``shapely>=2.0 (found 1.8.5)``, ``laspy>=2.4
+    (missing)``; empty when everything is there."""
+    missing = []
+    for module, distribution, minimum in requirements:
+        version = installed_version(module, distribution)
+        if version is None:
+            missing.append(f"{distribution}>={minimum} (missing)")
+        elif _release(version) < _release(minimum):
+            missing.append(f"{distribution}>={minimum} (found {version})")
+    return missing
+
+
+def missing_message(missing: list[str]) -> str:
+    """The one message the plugin shows when requirements are unmet: what, and how to fix."""
+    names = " ".join(f"'{entry.split(' ')[0]}'" for entry in missing)
+    return (
+        f"gisroads: its Processing algorithms are not loaded: QGIS's Python "
+        f"({sys.executable or 'python3'} {sys.version.split()[0]}) lacks "
+        f"{', '.join(missing)}. Start QGIS from a Python environment that has them: "
+        "python3 -m venv --system-site-packages ~/gisroads-venv && "
+        f"~/gisroads-venv/bin/pip install --no-binary shapely 'numpy<2' {names} "
+        "(shapely built against the system GEOS: its PyPI wheel crashes inside QGIS), "
+        "then source ~/gisroads-venv/bin/activate && qgis. From a gisroads checkout: "
+        "scripts/setup.sh qgis builds .venv-qgis for that.")
+
+
+def load_error_message(error: BaseException) -> str:
+    """The one message shown when the requirements are met but the algorithms still fail to
+    import (a package built for another numpy, a broken install)."""
+    text = str(error).splitlines()[0] if str(error) else ""
+    return (f"gisroads: its Processing algorithms are not loaded: importing them failed "
+            f"with {type(error).__name__}: {text}. Check that QGIS's Python packages are "
+            "Debian's builds, or built against the system GEOS/GDAL/PROJ, with numpy < 2.")

@@ -1,0 +1,111 @@
+"""The plugin in a QGIS whose Python lacks the algorithms' packages (Debian 12's own: shapely
+1.8, no laspy, no lazrs): it loads without a traceback and says in one message what is
+missing and how to fix it; with the packages it loads its algorithms as before."""
+import re
+import sys
+import tomllib
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from processing_provider.dependencies import (REQUIREMENTS, load_error_message,
+                                              missing_message, missing_requirements)
+
+from tests.qgis_provider.conftest import QgisProcess
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def plain_qgis_process(plugin_zip, tmp_path_factory) -> QgisProcess:
+    """qgis_process as QGIS starts normally: the system Python alone, no .venv-qgis."""
+    home = tmp_path_factory.mktemp("plain_qgis_home")
+    plugins = home / ".local/share/QGIS/QGIS3/profiles/default/python/plugins"
+    plugins.mkdir(parents=True)
+    with zipfile.ZipFile(plugin_zip) as archive:
+        archive.extractall(plugins)
+    runner = QgisProcess(home)
+    del runner.env["PYTHONPATH"]
+    return runner
+
+
+def test_without_its_packages_the_plugin_says_what_is_missing_once(plain_qgis_process):
+    enabled = plain_qgis_process("plugins", "enable", "gisroads_qgis")
+    listed = plain_qgis_process("list")
+    for result in (enabled, listed):
+        assert "Traceback" not in result.stdout + result.stderr
+        assert "Error" not in result.stderr
+    assert not re.search(r"^\s*gisroads:", listed.stdout, flags=re.M)  # no algorithm
+    messages = [line for line in listed.stderr.splitlines() if line.startswith("gisroads:")]
+    assert len(messages) == 1, listed.stderr
+    message = messages[0]
+    # Debian 12's Python: shapely 1.8.5, no laspy, no lazrs
+    assert "shapely>=2.0 (found 1." in message
+    assert "laspy>=2.4 (missing)" in message and "lazrs>=0.5 (missing)" in message
+    assert "pip install --no-binary shapely" in message and "activate && qgis" in message
+    run = plain_qgis_process("run", "gisroads:lidarroadnetwork", "--", "INPUT=x.laz",
+                             check=False)
+    assert "Traceback" not in run.stdout + run.stderr and "not found" in run.stdout + run.stderr
+
+
+def test_with_its_packages_the_plugin_lists_its_algorithms(qgis_process):
+    listed = qgis_process("list")
+    assert "gisroads:lidarroadnetwork" in listed.stdout
+    assert "not loaded" not in listed.stderr
+
+
+def test_requirements_are_pyprojects_and_met_here():
+    pyproject = tomllib.loads((REPO / "pyproject.toml").read_text())
+    declared = {}
+    for spec in pyproject["project"]["dependencies"]:
+        name, minimum = re.fullmatch(r"([A-Za-z0-9_.-]+)(?:\[.*\])?>=([0-9.]+)",
+                                     spec).groups()
+        declared[name.lower()] = minimum
+    # not needed in QGIS: training (scikit-learn), clusters (dask), the CLI's bar (tqdm)
+    expected = {k: v for k, v in declared.items()
+                if k not in {"scikit-learn", "dask", "tqdm"}}
+    assert {dist: minimum for _, dist, minimum in REQUIREMENTS} == expected
+    assert missing_requirements() == []  # this environment is the QGIS one
+
+
+def test_missing_and_old_packages_are_named():
+    assert missing_requirements([("json", "not-a-distribution", "1.0")]) == []  # __version__
+    assert missing_requirements([("no_such_module_here", "nosuch", "1.0")]) == [
+        "nosuch>=1.0 (missing)"]
+    assert missing_requirements([("pytest", "pytest", "999.1")]) == [
+        f"pytest>=999.1 (found {pytest.__version__})"]
+    message = missing_message(["shapely>=2.0 (found 1.8.5)", "laspy>=2.4 (missing)"])
+    assert "\n" not in message and sys.version.split()[0] in message
+    assert "'shapely>=2.0' 'laspy>=2.4'" in message
+    assert load_error_message(ImportError("numpy.core.multiarray failed to import\nmore")) \
+        .endswith("ImportError: numpy.core.multiarray failed to import. Check that QGIS's "
+                  "Python packages are Debian's builds, or built against the system "
+                  "GEOS/GDAL/PROJ, with numpy < 2.")
+
+
+def test_the_stand_in_plugin_shows_one_message_bar_item(qgis_app):
+    from qgis.core import Qgis
+
+    from processing_provider.plugin import UnavailablePlugin
+
+    class Bar:
+        def __init__(self):
+            self.pushed = []
+
+        def pushMessage(self, title, text, level, duration):  # noqa: N802
+            self.pushed.append((title, text, level, duration))
+
+    class Iface:
+        bar = Bar()
+
+        def messageBar(self):  # noqa: N802
+            return self.bar
+
+    iface = Iface()
+    plugin = UnavailablePlugin(iface, "gisroads: missing shapely>=2.0")
+    plugin.initGui()
+    plugin.initProcessing()
+    plugin.unload()
+    assert iface.bar.pushed == [("gisroads", "gisroads: missing shapely>=2.0", Qgis.Critical,
+                                 0)]
