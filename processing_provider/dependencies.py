@@ -62,13 +62,25 @@ def missing_requirements(requirements=REQUIREMENTS) -> list[str]:
     return missing
 
 
-def missing_message(missing: list[str]) -> str:
-    """The one message the plugin shows when requirements are unmet: what, and how to fix."""
+class Unmet:
+    """Why the algorithms cannot load (``what``) and how to fix it (``fix``): one message,
+    ``str()`` of which is the full line the message log gets."""
+
+    def __init__(self, what: str, fix: str):
+        self.what, self.fix = what, fix
+
+    def __str__(self):
+        return f"gisroads: {self.what} {self.fix}"
+
+
+def missing_message(missing: list[str]) -> Unmet:
+    """What the plugin says when requirements are unmet: what, and how to fix it."""
     names = " ".join(f"'{entry.split(' ')[0]}'" for entry in missing)
-    return (
-        f"gisroads: its Processing algorithms are not loaded: QGIS's Python "
-        f"({sys.executable or 'python3'} {sys.version.split()[0]}) lacks "
-        f"{', '.join(missing)}. Start QGIS from a Python environment that has them: "
+    return Unmet(
+        f"the Processing algorithms are not loaded: QGIS's Python lacks "
+        f"{', '.join(missing)}.",
+        f"QGIS's Python is {sys.executable or 'python3'} {sys.version.split()[0]}. "
+        "Start QGIS from a Python environment that has them: "
         "python3 -m venv --system-site-packages ~/gisroads-venv && "
         f"~/gisroads-venv/bin/pip install --no-binary shapely 'numpy<2' {names} "
         "(shapely built against the system GEOS: its PyPI wheel crashes inside QGIS), "
@@ -76,10 +88,11 @@ def missing_message(missing: list[str]) -> str:
         "scripts/setup.sh qgis builds .venv-qgis for that.")
 
 
-def load_error_message(error: BaseException) -> str:
-    """The one message shown when the requirements are met but the algorithms still fail to
+def load_error_message(error: BaseException) -> Unmet:
+    """What the plugin says when the requirements are met but the algorithms still fail to
     import (a package built for another numpy, a broken install)."""
     text = str(error).splitlines()[0] if str(error) else ""
-    return (f"gisroads: its Processing algorithms are not loaded: importing them failed "
-            f"with {type(error).__name__}: {text}. Check that QGIS's Python packages are "
-            "Debian's builds, or built against the system GEOS/GDAL/PROJ, with numpy < 2.")
+    return Unmet(f"the Processing algorithms are not loaded: importing them failed with "
+                 f"{type(error).__name__}: {text}.",
+                 "Check that QGIS's Python packages are Debian's builds, or built against "
+                 "the system GEOS/GDAL/PROJ, with numpy < 2.")

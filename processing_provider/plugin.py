@@ -24,24 +24,25 @@ class GisroadsPlugin:
 
 class UnavailablePlugin:
     """The plugin when its algorithms cannot load (missing Python packages): registers no
-    provider and shows ``message`` once, instead of a Python error dialog: in the message
-    log (which qgis_process prints on stderr) and in the desktop's message bar."""
+    provider and says why once, instead of a Python error dialog: the whole message in the
+    message log (which qgis_process prints on stderr), what is wrong in the desktop's
+    message bar with the fix behind its "Show more"."""
 
-    def __init__(self, iface, message: str):
+    def __init__(self, iface, unmet):
         self.iface = iface
-        self.message = message
+        self.unmet = unmet  # dependencies.Unmet
         self.logged = False
 
     def initProcessing(self):  # noqa: N802
         if self.logged:
             return
         self.logged = True
-        QgsMessageLog.logMessage(self.message, "gisroads", Qgis.Critical)
+        QgsMessageLog.logMessage(str(self.unmet), "gisroads", Qgis.Critical)
 
     def initGui(self):  # noqa: N802
         self.initProcessing()
-        self.iface.messageBar().pushMessage("gisroads", self.message, level=Qgis.Critical,
-                                            duration=0)
+        self.iface.messageBar().pushMessage("gisroads", self.unmet.what, self.unmet.fix,
+                                            Qgis.Critical, 0)
 
     def unload(self):
         pass
