@@ -8,7 +8,9 @@ output, which still exits 0.
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import signal
 import sys
 from pathlib import Path
 
@@ -20,21 +22,34 @@ EPILOG = "Distances are in metres. Outputs are written in the input's CRS."
 
 class _ProgressBar:
     """Progress on stderr: a tqdm bar on a terminal; elsewhere (a log file, a pipe, CI),
-    where a bar's carriage returns garble the text, one line per 10 %."""
+    where a bar's carriage returns garble the text, one line per 10 %; with
+    ``--progress-json`` (even with ``--json``), one JSON object per line for a program
+    driving gisroads, ``{"progress": 0.42, "message": "..."}`` at each percent or new
+    message (other stderr lines, ``gisroads: ...``, are warnings and errors)."""
 
     active: list[_ProgressBar] = []
     """Bars on screen, closed before an error or a cancel is printed (:func:`main`)."""
+    json_lines = False
+    """Set by :func:`main` from ``--progress-json``."""
 
     def __init__(self, enabled: bool):
         self.enabled = enabled
         self.tty = sys.stderr.isatty()
         self.last = -1
+        self.message = None
         self.bar = None
 
     def __call__(self, fraction: float, message: str = "") -> None:
+        percent = max(0, min(100, int(fraction * 100)))
+        if self.json_lines:
+            if percent != self.last or message != self.message:
+                sys.stderr.write(json.dumps({"progress": round(min(max(fraction, 0.0), 1.0),
+                                                               4), "message": message}) + "\n")
+                sys.stderr.flush()
+                self.last, self.message = percent, message
+            return
         if not self.enabled:
             return
-        percent = max(0, min(100, int(fraction * 100)))
         if self.tty:
             self._draw(percent, message)
             if fraction >= 1.0:
@@ -319,6 +334,9 @@ def build_parser() -> argparse.ArgumentParser:
     def add(name, func, help_text, description):
         p = sub.add_parser(name, help=help_text, description=description, epilog=EPILOG)
         p.add_argument("--json", action="store_true", help="print the result as JSON")
+        p.add_argument("--progress-json", action="store_true",
+                       help="report progress on stderr as JSON lines, {\"progress\": 0.42, "
+                            "\"message\": \"...\"} (for programs running gisroads)")
         p.set_defaults(func=func)
         return p
 
@@ -566,6 +584,20 @@ def _error_text(err: Exception, args) -> str:
     return str(err)
 
 
+def _cancel_on_sigterm(cancelled: type[Exception]):
+    """SIGTERM (``kill``, a program stopping its gisroads run) cancels like Ctrl-C: the
+    outputs being written are removed (they are written to temporary files) and the exit
+    status is 130. Returns the previous handler (None outside the main thread, where Python
+    delivers no signal)."""
+    import threading
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def cancel(signum, frame):
+        raise cancelled()
+    return signal.signal(signal.SIGTERM, cancel)
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -574,8 +606,11 @@ def main(argv=None) -> int:
     from .io.raster import RasterError
     from .progress import Cancelled
     notes = []
+    _ProgressBar.json_lines = getattr(args, "progress_json", False)
+    previous = None
     try:
         check_outputs(args)
+        previous = _cancel_on_sigterm(Cancelled)
         with reported_warnings(notes.append):
             status = args.func(args)
         for note in notes:  # after the progress bar and the result
@@ -596,6 +631,9 @@ def main(argv=None) -> int:
         _ProgressBar.close_all()
         print("gisroads: cancelled; nothing written", file=sys.stderr)
         return 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

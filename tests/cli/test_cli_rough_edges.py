@@ -207,3 +207,38 @@ def test_progress_on_a_terminal_is_a_tqdm_bar(tmp_path):
     assert screen.count("\r") >= 2
     assert re.search(r"100%\|.*\| \d\d:\d\d<\d\d:\d\d done", screen)
     assert screen.endswith("\n")  # the closed bar leaves its line
+
+
+def test_progress_as_json_lines_for_a_driving_program(tmp_path):
+    result = gisroads(*synth_args(tmp_path), "--json", "--progress-json")
+    assert result.returncode == 0, result.stderr
+    assert set(json.loads(result.stdout)) == {"truth", "cloud", "image", "dsm"}
+    events = [json.loads(line) for line in result.stderr.splitlines()]
+    assert len(events) >= 5 and all(set(e) == {"progress", "message"} for e in events)
+    fractions = [e["progress"] for e in events]
+    assert fractions == sorted(fractions) and fractions[0] == 0.0 and fractions[-1] == 1.0
+    assert any("LiDAR tile" in e["message"] for e in events)
+
+
+def test_sigterm_cancels_and_leaves_nothing(tmp_path):
+    from gisroads.resources import demo_dir
+    out = tmp_path / "out"
+    out.mkdir()
+    process = subprocess.Popen([*GISROADS, "lidar",
+                                str(demo_dir() / "ign_lidar_hd_0292_6833_thinned.laz"),
+                                "-o", str(out / "roads.gpkg"), "--rasters", str(out / "r"),
+                                "--workers", "1", "--progress-json"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    for line in process.stderr:  # wait until the work is well under way
+        lines.append(line)
+        if line.startswith("{") and json.loads(line)["progress"] >= 0.1:
+            break
+    process.terminate()
+    rest = process.stderr.read()
+    process.wait(timeout=120)
+    assert process.returncode == 130, (lines, rest)
+    assert rest.strip().splitlines()[-1] == "gisroads: cancelled; nothing written"
+    assert "Traceback" not in rest
+    written = [p for p in out.rglob("*") if p.is_file()]
+    assert not [p for p in written if p.suffix in {".gpkg", ".tif"} or p.name.startswith(".")]
