@@ -16,6 +16,11 @@ def classFactory(iface):  # noqa: N802 (QGIS's name)
     from .plugin import GisroadsPlugin, UnavailablePlugin
     missing = missing_requirements()
     if missing:
+        from .external import find_executable
+        from .plugin import ExternalPlugin
+        executable = find_executable()
+        if executable is not None:  # external-tool mode
+            return ExternalPlugin(iface, missing_message(missing), executable)
         return UnavailablePlugin(iface, missing_message(missing))
     try:
         from . import provider  # noqa: F401: imports gisroads and every dependency

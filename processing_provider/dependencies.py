@@ -85,7 +85,10 @@ def missing_message(missing: list[str]) -> Unmet:
         f"~/gisroads-venv/bin/pip install --no-binary shapely 'numpy<2' {names} "
         "(shapely built against the system GEOS: its PyPI wheel crashes inside QGIS), "
         "then source ~/gisroads-venv/bin/activate && qgis. From a gisroads checkout: "
-        "scripts/setup.sh qgis builds .venv-qgis for that.")
+        "scripts/setup.sh qgis builds .venv-qgis for that. Or let the algorithms that can "
+        "run a gisroads command installed elsewhere (pipx install gisroads, a venv): put "
+        "it on PATH, or name it in the GISROADS_EXECUTABLE environment variable or the "
+        "QGIS setting gisroads/executable.")
 
 
 def load_error_message(error: BaseException) -> Unmet:

@@ -46,3 +46,37 @@ class UnavailablePlugin:
 
     def unload(self):
         pass
+
+
+class ExternalPlugin(UnavailablePlugin):
+    """The plugin in external-tool mode: QGIS's Python lacks the packages, but a
+    ``gisroads`` command runs elsewhere; registers the provider of the algorithms that run
+    through it (:mod:`.external`) and says so once, as information."""
+
+    def __init__(self, iface, unmet, executable: str):
+        super().__init__(iface, unmet)
+        self.executable = executable
+        self.provider = None
+
+    def initProcessing(self):  # noqa: N802
+        if self.provider is not None:
+            return
+        from .external import ExternalProvider
+        self.provider = ExternalProvider(self.executable)
+        QgsApplication.processingRegistry().addProvider(self.provider)
+        QgsMessageLog.logMessage(self.note(), "gisroads", Qgis.Info)
+
+    def note(self) -> str:
+        return (f"gisroads: the LiDAR road network runs through the external "
+                f"{self.executable}; the other algorithms need, in QGIS's Python, "
+                f"{self.unmet.what.split(' lacks ', 1)[-1]}")
+
+    def initGui(self):  # noqa: N802
+        self.initProcessing()
+        self.iface.messageBar().pushMessage("gisroads", self.note()[len("gisroads: "):],
+                                            self.unmet.fix, Qgis.Info, 10)
+
+    def unload(self):
+        if self.provider is not None:
+            QgsApplication.processingRegistry().removeProvider(self.provider)
+            self.provider = None

@@ -1,6 +1,7 @@
 """The plugin in a QGIS whose Python lacks the algorithms' packages (Debian 12's own: shapely
 1.8, no laspy, no lazrs): it loads without a traceback and says in one message what is
-missing and how to fix it; with the packages it loads its algorithms as before."""
+missing and how to fix it; with an external gisroads command it runs the LiDAR pipeline
+through it (external-tool mode); with the packages it loads its algorithms as before."""
 import json
 import os
 import re
@@ -31,6 +32,10 @@ def plain_qgis_process(plugin_zip, tmp_path_factory) -> QgisProcess:
         archive.extractall(plugins)
     runner = QgisProcess(home)
     del runner.env["PYTHONPATH"]
+    # and no gisroads command to run as an external tool
+    runner.env["PATH"] = os.pathsep.join(
+        folder for folder in runner.env["PATH"].split(os.pathsep)
+        if not (Path(folder) / "gisroads").exists())
     runner.enabled = runner("plugins", "enable", "gisroads_qgis")
     return runner
 
@@ -161,3 +166,72 @@ def test_the_desktop_starts_with_one_message_and_no_error_dialog(plain_qgis_proc
     ((title, text),) = [item for item in seen["bar"] if item[0] == "gisroads"]
     assert text.startswith("the Processing algorithms are not loaded: QGIS's Python lacks "
                            "shapely>=2.0 (found 1.")
+
+
+def external_gisroads() -> str:
+    """The gisroads command of this (QGIS) environment, as an external tool."""
+    found = shutil.which("gisroads", path=str(Path(sys.executable).parent))
+    assert found, "no gisroads command beside this Python"
+    return found
+
+
+@pytest.fixture(scope="module")
+def external_qgis_process(plugin_zip, tmp_path_factory) -> QgisProcess:
+    """qgis_process with the system Python alone and an external gisroads named."""
+    home = tmp_path_factory.mktemp("external_qgis_home")
+    plugins = home / ".local/share/QGIS/QGIS3/profiles/default/python/plugins"
+    plugins.mkdir(parents=True)
+    with zipfile.ZipFile(plugin_zip) as archive:
+        archive.extractall(plugins)
+    runner = QgisProcess(home)
+    del runner.env["PYTHONPATH"]
+    runner.env["GISROADS_EXECUTABLE"] = external_gisroads()
+    runner.env["OPENBLAS_NUM_THREADS"] = "1"
+    runner("plugins", "enable", "gisroads_qgis")
+    return runner
+
+
+def test_external_mode_runs_the_lidar_pipeline_through_gisroads(external_qgis_process,
+                                                               lidar_dir, tmp_path):
+    listed = external_qgis_process("list")
+    assert "Traceback" not in listed.stdout + listed.stderr
+    assert re.findall(r"^\s*(gisroads:\S+)", listed.stdout, flags=re.M) == [
+        "gisroads:lidarroadnetwork"]
+    out = tmp_path / "fusa.gpkg"
+    done = external_qgis_process("--json", "run", "gisroads:lidarroadnetwork", "--",
+                                 f"INPUT={lidar_dir / 'fusa.laz'}", f"OUTPUT={out}")
+    results = json.loads(done.stdout)["results"]
+    assert results["ROADS"] >= 3 and results["LENGTH_M"] > 300 and results["OUTPUT"] == str(out)
+    import sqlite3
+    con = sqlite3.connect(out)
+    styled = {row[0] for row in con.execute("SELECT f_table_name FROM layer_styles")}
+    con.close()
+    assert {"road_centrelines", "road_polygons", "junctions"} <= styled
+    # an input error is the command's one line, as a Processing error
+    bad = external_qgis_process("run", "gisroads:lidarroadnetwork", "--",
+                                f"INPUT={tmp_path / 'none.laz'}", f"OUTPUT={tmp_path / 'x.gpkg'}",
+                                check=False)
+    assert bad.returncode != 0 and "none.laz" in bad.stdout + bad.stderr
+    assert "Traceback" not in bad.stdout + bad.stderr
+
+
+def test_external_mode_cancel_stops_the_command_and_leaves_nothing(qgis_app, tmp_path):
+    from qgis.core import QgsProcessingContext, QgsProcessingException, QgsProcessingFeedback
+
+    from gisroads.resources import demo_dir
+    from processing_provider.external import ExternalLidarRoadNetwork
+
+    algorithm = ExternalLidarRoadNetwork(external_gisroads())
+    algorithm.initAlgorithm()
+    feedback = QgsProcessingFeedback()
+    percents = []
+    feedback.progressChanged.connect(
+        lambda percent: (percents.append(percent), percent >= 10 and feedback.cancel()))
+    params = {"INPUT": str(demo_dir() / "ign_lidar_hd_0292_6833_thinned.laz"),
+              "OUTPUT": str(tmp_path / "roads.gpkg")}
+    context = QgsProcessingContext()
+    assert algorithm.prepare(params, context, feedback)
+    with pytest.raises(QgsProcessingException, match="cancelled"):
+        algorithm.runPrepared(params, context, feedback)
+    assert 10 <= max(percents) < 100
+    assert list(tmp_path.iterdir()) == []
