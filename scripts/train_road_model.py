@@ -217,7 +217,8 @@ shared (loaded) machine.
     if rows_adapted:
         text += f"""
 ### With self-adaptation (`gisroads.learn.training.adapt_to_image`)
-The top 4 % of each image's pixels by this model's probability as road, its lowest 50 % as
+The top 4 % of each image's pixels by this model's probability as road (only in connected
+parts shaped like roads: skeleton >= 30 m, mean width <= 20 m), its lowest 50 % as
 non-road, a 60-tree model fitted to 40 000 of them and blended half and half (log-odds)
 with this one (needs scikit-learn at prediction time; the times include the fit).
 

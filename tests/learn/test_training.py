@@ -7,7 +7,7 @@ from rasterio import features as rio_features
 
 from gisroads.learn.model import WorkGrid, predict_probability
 from gisroads.learn.scores import pixel_auc
-from gisroads.learn.training import adapt_to_image, layer_labels, train_from_layer
+from gisroads.learn.training import adapt_to_image, elongated, layer_labels, train_from_layer
 
 pytest.importorskip("sklearn")
 
@@ -71,3 +71,13 @@ def test_adaptation_blends_a_model_of_the_image(scene_image, scene_model):
     assert adapted.n_trees == scene_model.n_trees + 20
     probability = predict_probability(image, adapted).data
     assert np.nanmin(probability) >= 0 and np.nanmax(probability) <= 1
+
+
+def test_elongated_keeps_road_shaped_parts():
+    mask = np.zeros((200, 200), bool)
+    mask[20:28, 10:190] = True     # a 4 m x 90 m road at 0.5 m
+    mask[100:160, 100:160] = True  # a 30 m square lot
+    mask[180:184, 10:30] = True    # a 10 m stub
+    kept = elongated(mask, 0.5)
+    assert kept[20:28, 10:190].all() and not kept[100:160, 100:160].any()
+    assert not kept[180:184, 10:30].any()
