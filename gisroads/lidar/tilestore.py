@@ -39,9 +39,11 @@ from .tiles import Tile, tile_grid
 #: One stored point.
 RECORD = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<u2"),
                    ("classification", "u1"), ("return_number", "u1"),
-                   ("number_of_returns", "u1")])
+                   ("number_of_returns", "u1"), ("index", "<i8")])
+"""``index``: the point's position in the inputs (file after file, in their sorted order),
+which classifies points back into a copy of the file."""
 LAS_SUFFIXES = (".las", ".laz")
-STORE_VERSION = 1
+STORE_VERSION = 2
 
 
 def las_inputs(source) -> list[Path]:
@@ -132,6 +134,8 @@ class TileStore:
     crs: tuple[CRS | None, CRS | None]
     cells: dict
     key: str
+    temporary: Path | None = None
+    """The temporary folder holding the store, when no work folder was given."""
 
     @property
     def stride(self) -> float:
@@ -157,6 +161,34 @@ class TileStore:
         return sum(self.cells.get((r, c), 0) for r in range(tile.row, tile.row + self.reach)
                    for c in range(tile.col, tile.col + self.reach))
 
+    def cells_near(self, xy, reach_m: float) -> list[tuple[int, int]]:
+        """The stored cells holding points within ``reach_m`` (XY) of any position ``xy``."""
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        if len(xy) == 0 or not self.cells:
+            return []
+        cells = np.unique(np.floor((xy - np.array(self.extent[:2])) / self.stride)
+                          .astype(np.int64)[:, ::-1], axis=0)
+        k = int(np.ceil(reach_m / self.stride))
+        ring = np.stack(np.meshgrid(np.arange(-k, k + 1), np.arange(-k, k + 1)), -1)
+        near = np.unique((cells[:, None, :] + ring.reshape(1, -1, 2)).reshape(-1, 2), axis=0)
+        return [(int(r), int(c)) for r, c in near if (int(r), int(c)) in self.cells]
+
+    def iter_cells(self, cells=None):
+        """``(index, cloud)`` of every stored cell (or of ``cells``), row by row: the points
+        of the cell and their positions in the inputs (:data:`RECORD`)."""
+        for r, c in sorted(self.cells if cells is None else cells):
+            points = np.fromfile(self.folder / "cells" / _cell_name(r, c), RECORD)
+            yield np.ascontiguousarray(points["index"]), self._cloud(points)
+
+    def _cloud(self, points: np.ndarray) -> PointCloud:
+        xyz = np.empty((len(points), 3))
+        xyz[:, 0], xyz[:, 1], xyz[:, 2] = points["x"], points["y"], points["z"]
+        return PointCloud(xyz, np.ascontiguousarray(points["intensity"]),
+                          np.ascontiguousarray(points["classification"]),
+                          np.ascontiguousarray(points["return_number"]),
+                          np.ascontiguousarray(points["number_of_returns"]),
+                          crs=self.crs[0], source_crs=self.crs[1])
+
     def read(self, tile: Tile) -> PointCloud | None:
         """The points inside the tile's bounds (edges included), or None when it has none.
 
@@ -178,17 +210,16 @@ class TileStore:
             return None
         points = np.concatenate(parts)
         del parts
-        xyz = np.empty((len(points), 3))
-        xyz[:, 0], xyz[:, 1], xyz[:, 2] = points["x"], points["y"], points["z"]
-        intensity = np.ascontiguousarray(points["intensity"])
-        return PointCloud(xyz, intensity if intensity.any() else None,
-                          np.ascontiguousarray(points["classification"]),
-                          np.ascontiguousarray(points["return_number"]),
-                          np.ascontiguousarray(points["number_of_returns"]),
-                          crs=self.crs[0], source_crs=self.crs[1])
+        cloud = self._cloud(points)
+        if not cloud.intensity.any():
+            cloud.intensity = None
+        return cloud
 
     def remove(self) -> None:
+        """Delete the store (and its temporary folder)."""
         shutil.rmtree(self.folder, ignore_errors=True)
+        if self.temporary is not None:
+            shutil.rmtree(self.temporary, ignore_errors=True)
 
 
 def _manifest(store: TileStore) -> dict:
@@ -255,6 +286,7 @@ def open_store(source, work_dir=None, *, tile_m: float = 300.0, overlap_m: float
                 raise
             shutil.rmtree(building, ignore_errors=True)
         store.folder = folder
+        store.temporary = root if work_dir is None else None
         return store
     except BaseException:
         shutil.rmtree(building, ignore_errors=True)
@@ -288,6 +320,7 @@ def _build(folder: Path, paths, infos, extent, crs, key, *, tile_m, overlap_m, c
             records["x"], records["y"], records["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
             del xyz
             records["intensity"] = chunk.intensity[order]
+            records["index"] = done + order
             for name in ("classification", "return_number", "number_of_returns"):
                 records[name] = getattr(chunk, name)[order]
             for s, e in zip(starts, ends):  # one write per cell the chunk touches

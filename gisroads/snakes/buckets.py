@@ -31,6 +31,38 @@ def iter_source(source, *, chunk_size: int = DEFAULT_CHUNK) -> Iterator[tuple[in
         offset += len(chunk)
 
 
+def iter_indexed(source, *, chunk_size: int = DEFAULT_CHUNK, near=None
+                 ) -> Iterator[tuple[np.ndarray, PointCloud]]:
+    """``(position of each point in the source, chunk)`` of a PointCloud, a LAS/LAZ path or
+    a :class:`gisroads.lidar.tilestore.TileStore` (the LiDAR pipeline's points bucketed by
+    tile on disk: one stored cell at a time).
+
+    ``near=(xy, reach_m)`` lets a tile store read only its cells within ``reach_m`` of the
+    positions ``xy``; a file or a cloud is read whole (callers filter the points anyway).
+    """
+    from ..lidar.tilestore import TileStore
+
+    if isinstance(source, TileStore):
+        yield from source.iter_cells(None if near is None else source.cells_near(*near))
+        return
+    for offset, chunk in iter_source(source, chunk_size=chunk_size):
+        yield np.arange(offset, offset + len(chunk), dtype=np.int64), chunk
+
+
+def source_size(source) -> int:
+    """Points of a PointCloud, a LAS/LAZ path or a tile store (1 when unknown)."""
+    from ..io.las import las_info
+    from ..lidar.tilestore import TileStore
+
+    if isinstance(source, PointCloud):
+        return max(len(source), 1)
+    if isinstance(source, TileStore):
+        return max(source.point_count, 1)
+    if isinstance(source, (str, Path)):
+        return max(las_info(source)["point_count"], 1)
+    return 1
+
+
 def _sorted_unique(values: np.ndarray) -> np.ndarray:
     """Distinct values, ascending (by a sort: numpy 2's hashing np.unique is far slower on
     millions of cell keys)."""
@@ -109,10 +141,17 @@ def read_corridor(source, xy: np.ndarray, radius_m: float, *,
     index = GridBuckets(xy, np.zeros(len(xy), np.int64), radius_m)
     tree = cKDTree(xy)
     parts, indices = [], []
-    for offset, chunk in iter_source(source, chunk_size=chunk_size):
+    for position, chunk in iter_indexed(source, chunk_size=chunk_size, near=(xy, radius_m)):
         candidate = np.flatnonzero(index.in_corridor(chunk.xyz[:, :2]))
         distance, _ = tree.query(chunk.xyz[candidate, :2], distance_upper_bound=radius_m)
         keep = candidate[np.isfinite(distance)]
         parts.append(subset(chunk, keep))
-        indices.append(offset + keep)
-    return concatenate(parts), np.concatenate(indices).astype(np.int64)
+        indices.append(position[keep])
+    if not parts:  # a tile store without a cell near the positions
+        empty = np.empty(0, np.uint8)
+        crs = getattr(source, "crs", (None, None))
+        return PointCloud(np.empty((0, 3)), np.empty(0, np.uint16), empty, empty, empty,
+                          crs=crs[0], source_crs=crs[1]), np.empty(0, np.int64)
+    cloud, indices = concatenate(parts), np.concatenate(indices).astype(np.int64)
+    order = np.argsort(indices, kind="stable")  # the source's order
+    return subset(cloud, order), indices[order]

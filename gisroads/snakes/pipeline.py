@@ -352,6 +352,7 @@ def map_patches(cloud_path, map_lines: gpd.GeoDataFrame, *, snap_m: float | None
     crs : pyproj.CRS or None
     """
     from .registration import SNAP_M, SUPPORT_RADIUS_M, register_map
+    from ..lidar.tilestore import open_store
     from .subclouds import read_corridor, road_patches
 
     lines = map_lines[map_lines.geometry.notna() & ~map_lines.geometry.is_empty]
@@ -365,15 +366,23 @@ def map_patches(cloud_path, map_lines: gpd.GeoDataFrame, *, snap_m: float | None
     snap = SNAP_M if snap_m is None else snap_m
     report(progress, 0.0, "reading the points along the map")
     along = shapely.get_coordinates(shapely.segmentize(lines.geometry.values, 0.5))
-    cloud, _ = read_corridor(cloud_path, along, SUPPORT_RADIUS_M + snap + 0.5)
-    if len(cloud) == 0:
-        raise ValueError(f"{cloud_path}: no point lies along the map's lines; "
-                         "does the map cover the cloud?")
-    registered = register_map(lines, cloud, snap_m=snap, progress=scaled(progress, 0.1, 0.6))
-    del cloud
-    report(progress, 0.6, "cutting the road patches")
-    patches = [p for p in road_patches(registered, cloud_path, progress=scaled(progress, 0.6, 1))
-               if len(p.points) >= MIN_NEIGHBOURS and len(p.samples_xyz) >= 2]
+    # the file is decoded once into the LiDAR pipeline's tile store; the three passes
+    # below read only its cells along the map
+    store = open_store(cloud_path, progress=scaled(progress, 0.0, 0.05))
+    try:
+        cloud, _ = read_corridor(store, along, SUPPORT_RADIUS_M + snap + 0.5)
+        if len(cloud) == 0:
+            raise ValueError(f"{cloud_path}: no point lies along the map's lines; "
+                             "does the map cover the cloud?")
+        registered = register_map(lines, cloud, snap_m=snap,
+                                  progress=scaled(progress, 0.1, 0.6))
+        del cloud
+        report(progress, 0.6, "cutting the road patches")
+        patches = [p for p in road_patches(registered, store,
+                                           progress=scaled(progress, 0.6, 1))
+                   if len(p.points) >= MIN_NEIGHBOURS and len(p.samples_xyz) >= 2]
+    finally:
+        store.remove()
     if not patches:
         raise ValueError(f"{cloud_path}: no road patch holds enough points along the map")
     return registered, patches, working if working is not None else lines.crs

@@ -13,14 +13,13 @@ subclouds are held.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..io.las import DEFAULT_CHUNK, PointCloud, las_info
+from ..io.las import DEFAULT_CHUNK
 from ..progress import Progress, report
-from .buckets import GridBuckets, iter_source, read_corridor
+from .buckets import GridBuckets, iter_indexed, read_corridor, source_size
 from .registration import RegisteredMap
 
 __all__ = ["RoadPatch", "road_patches", "read_corridor"]
@@ -123,9 +122,10 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
     ----------
     registered : RegisteredMap
         From :func:`gisroads.snakes.registration.register_map`, in the source's CRS.
-    source : PointCloud or path
-        The cloud, or a LAS/LAZ file read through
-        :func:`gisroads.io.las.iter_las_chunks`.
+    source : PointCloud, path or TileStore
+        The cloud, a LAS/LAZ file read through :func:`gisroads.io.las.iter_las_chunks`, or
+        the tile store of the LiDAR pipeline (:func:`gisroads.lidar.tilestore.open_store`),
+        of which only the cells along the map are read.
     plane_radius_m : float
         Radius of the support plane's points (paper: 4 m).
     plane_tolerance_m : float
@@ -147,8 +147,7 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
             raise ValueError(f"{name} must be positive, got {value}")
     xyz, tangent, road_of = registered.xyz, registered.tangent, registered.road_id
     n = len(xyz)
-    total = max(len(source) if isinstance(source, PointCloud)
-                else las_info(source)["point_count"] if isinstance(source, (str, Path)) else 1, 1)
+    total = source_size(source)
     grade = _grades(registered)
     prior = np.column_stack([np.zeros(n), grade * tangent[:, 0], grade * tangent[:, 1]])
     index = GridBuckets(xyz[:, :2], road_of, reach_m)
@@ -157,9 +156,11 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
 
     report(progress, 0.0, "fitting the support planes")
     moments = np.zeros((n, 9))
-    for offset, chunk in iter_source(source, chunk_size=chunk_size):
-        report(progress, 0.5 * (offset + len(chunk)) / total,
-               f"support planes: {offset + len(chunk)} of {total} points read")
+    read = 0
+    for _, chunk in iter_indexed(source, chunk_size=chunk_size,
+                                 near=(xyz[:, :2], plane_radius_m)):
+        read += len(chunk)
+        report(progress, 0.5 * read / total, f"support planes: {read} of {total} points read")
         candidate = chunk.xyz[plane_index.in_corridor(chunk.xyz[:, :2])]
         if len(candidate) == 0:
             continue
@@ -183,9 +184,10 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
                      np.split(np.arange(n), bounds)))  # each road's samples
     trees = {r: cKDTree(xyz[span, :2]) for r, span in spans.items()}
     found: dict[int, list] = {int(r): [] for r in roads}
-    for offset, chunk in iter_source(source, chunk_size=chunk_size):
-        report(progress, 0.5 + 0.5 * (offset + len(chunk)) / total,
-               f"subclouds: {offset + len(chunk)} of {total} points read")
+    read = 0
+    for position, chunk in iter_indexed(source, chunk_size=chunk_size, near=(xyz[:, :2], reach_m)):
+        read += len(chunk)
+        report(progress, 0.5 + 0.5 * read / total, f"subclouds: {read} of {total} points read")
         keys = index.keys(chunk.xyz[:, :2])
         order = np.argsort(keys, kind="stable")
         sorted_keys = keys[order]
@@ -204,7 +206,7 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
                                                           + planes[s, 2] * dy)
             keep = np.abs(residual) <= plane_tolerance_m
             local, nearest = local[keep], nearest[keep]
-            found[r].append((chunk.xyz[local], intensity[local], nearest, offset + local))
+            found[r].append((chunk.xyz[local], intensity[local], nearest, position[local]))
 
     none = (np.empty((0, 3)), np.empty(0, np.uint16), np.empty(0, np.int64),
             np.empty(0, np.int64))

@@ -129,3 +129,36 @@ def test_inputs_in_different_crs_or_missing_are_refused(cloud, tmp_path):
         las_inputs(tmp_path / "missing.laz")
     with pytest.raises(LasError, match="no LAS/LAZ"):
         las_inputs(str(tmp_path / "nothing_*.laz"))
+
+
+def test_snakes_read_the_map_corridor_from_the_store_as_from_the_file(tmp_path):
+    from gisroads.snakes.registration import register_map
+    from gisroads.snakes.subclouds import read_corridor, road_patches
+    from gisroads.synthetic.perturb import perturb_lines
+
+    scene = make_scene(seed=0, size_m=(500.0, 300.0), features=("bridge", "trees"))
+    path = tmp_path / "cloud.laz"
+    write_cloud(scene, path, density_per_m2=3.0, seed=0)
+    store = open_store(path, tmp_path / "work", tile_m=100.0, overlap_m=50.0)
+    # a map of the roads in the western 150 m only: the store reads the cells along it
+    edges = scene.truth_edges
+    west = edges[edges.geometry.bounds["maxx"] < scene.extent[0] + 150]
+    assert 0 < len(west) < len(edges)
+    shifted = perturb_lines(west, shift_m=3.0, jitter_m=0.3, seed=1)
+    along = shapely.get_coordinates(shapely.segmentize(shifted.geometry.values, 0.5))
+    near = store.cells_near(along, 5.0)
+    assert 0 < len(near) < 0.6 * len(store.cells)
+    from_file, file_index = read_corridor(path, along, 5.0)
+    from_store, store_index = read_corridor(store, along, 5.0)
+    assert len(file_index) > 1000
+    np.testing.assert_array_equal(store_index, file_index)
+    np.testing.assert_array_equal(from_store.xyz, from_file.xyz)
+    registered = register_map(shifted, from_file, snap_m=8.0)
+    patches_file = road_patches(registered, path, chunk_size=100_000)
+    patches_store = road_patches(registered, store)
+    assert sum(len(p.points) for p in patches_file) > 10_000
+    for a, b in zip(patches_file, patches_store, strict=True):
+        assert a.road_id == b.road_id
+        np.testing.assert_array_equal(a.point_index, b.point_index)
+        np.testing.assert_array_equal(a.sample_index, b.sample_index)
+        np.testing.assert_array_equal(a.points, b.points)
