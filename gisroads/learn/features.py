@@ -14,11 +14,11 @@ divided bands: brightness relative to the image's median, so that 8-bit, 11-bit 
 differently exposed images agree (:func:`image_statistics`, computed once per image so
 that tiles of one image share them). Scaling by the image's own spread (interquartile
 range) was tried and dropped: it depends on what the image shows (a forest scene has a
-narrow range that inflates every contrast) and cost 0.07 of mean held-out pixel AUC
-(DeepGlobe 0.36 against 0.71). Colour enters only as ratios of the recorded bands
+narrow range that inflates every contrast) and cost 0.06 of mean held-out pixel AUC
+(DeepGlobe 0.40 against 0.71). Colour enters only as ratios of the recorded bands
 (chromaticity, saturation, excess green), independent of exposure; balancing the bands to
 grey first was tried and dropped (Massachusetts pixel AUC 0.57 against 0.77: it turns a
-desert or a field grey, the colour of roads). A one-band (panchromatic) image has
+desert or a field grey, the colour of roads). See the model card for every figure. A one-band (panchromatic) image has
 chromaticity 1/3 and saturation 0; bands past the third are ignored.
 
 Features (names as in :func:`feature_names`), for each ``s`` in :data:`SCALES_M`:
