@@ -334,7 +334,7 @@ def evidence_job(cloud_path, out_path, *, cell_m: float | None = None,
     the cloud's metre working CRS; see :func:`gisroads.lidar.pipeline.evidence_raster`."""
     from .lidar.pipeline import evidence_raster
 
-    likelihood, used, missing = evidence_raster(cloud_path, cell_m=cell_m, tile_m=tile_m,
+    likelihood, _, used, missing = evidence_raster(cloud_path, cell_m=cell_m, tile_m=tile_m,
                                                 overlap_m=overlap_m, progress=progress)
     if likelihood is None:
         raise ValueError(f"{cloud_path}: no tile holds enough points to image")

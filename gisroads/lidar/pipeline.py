@@ -22,6 +22,7 @@ import pickle
 from dataclasses import dataclass, field, replace
 from functools import lru_cache, partial
 from pathlib import Path
+from typing import NamedTuple
 
 import geopandas as gpd
 import numpy as np
@@ -36,7 +37,7 @@ from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.rasters import raster_to_network
 from ..vectorize.ribbons import rectangles_to_network, ribbons_to_network
-from .evidence import road_evidence
+from .evidence import road_evidence, vehicle_cells, without_car_park_aisles
 from .ground import GroundPlanes, ground_planes
 from .hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, likelihood_maps,
                          road_hypotheses)
@@ -52,6 +53,25 @@ CUES = ("intensity", "evidence")
 #: Likelihood at which an evidence cell is road: the combined cues must all agree, since
 #: paved non-road surfaces (car parks, footpaths) score as road on every per-cell cue.
 EVIDENCE_THRESHOLD = 0.8
+#: The network stage on the evidence: weak cells (0.6) joined to strong ones count as road
+#: (hysteresis, as Canny's edge thresholds), so a road stays whole through a stretch its
+#: cues doubt and weak patches alone stay out (``bench/lidar_evidence_network.py``).
+EVIDENCE_NETWORK_OPTIONS = {"part_options": {"low_threshold": 0.6}}
+
+
+class EvidenceMosaic(NamedTuple):
+    """What :func:`evidence_raster` gives, over the tiles' cores (None without a tile)."""
+
+    likelihood: GeoRaster | None
+    """2-D road likelihood, float32 in [0, 1], NaN outside the data, working metre CRS."""
+    vehicles: GeoRaster | None
+    """Vehicle cells (:func:`gisroads.lidar.evidence.vehicle_cells`) on the same grid."""
+    used: dict
+    """Cue -> how it was measured (first tile)."""
+    missing: dict
+    """Cue -> why it was left out (first tile)."""
+
+
 #: Largest mosaic of tile rasters (ground heights, intensity, evidence) made in memory.
 MOSAIC_BUDGET_BYTES = 4 * 2**30
 @dataclass
@@ -216,7 +236,8 @@ def _tile_result_path(job: _TileJob, tile: Tile) -> Path | None:
 
 def _run_tile(job: _TileJob, tile: Tile):
     """``(reused, result)`` of one tile: its :class:`TileRoads` (intensity cue) or
-    ``(likelihood, references, used, missing)`` (evidence cue), None for a tile with fewer
+    ``(likelihood and vehicle cells, references, used, missing)`` (evidence cue), None for a
+    tile with fewer
     than ``min_points`` points. A finished tile is written to ``job.results`` (atomically)
     and taken from there when it is already there."""
     path = _tile_result_path(job, tile)
@@ -232,7 +253,8 @@ def _run_tile(job: _TileJob, tile: Tile):
             evidence = road_evidence(cloud, bounds=tile.bounds, references=job.references,
                                      **job.options)
             raster = evidence.likelihood
-            result = (GeoRaster(raster.data[None], raster.transform, raster.crs),
+            bands = np.stack([raster.data, vehicle_cells(evidence).data])
+            result = (GeoRaster(bands, raster.transform, raster.crs),
                       evidence.references, evidence.used, evidence.missing)
     del cloud
     if path is not None:
@@ -291,7 +313,7 @@ def evidence_raster(path, *, tile_m: float = 300.0, overlap_m: float = 100.0,
                     cell_m: float | None = None, min_points: int = 1000,
                     workers: int = 1, scheduler: str | None = None, work_dir=None,
                     progress: Progress = None, _run: dict | None = None
-                    ) -> tuple[GeoRaster | None, dict, dict]:
+                    ) -> EvidenceMosaic:
     """The road likelihood of a LAS/LAZ file (:func:`gisroads.lidar.evidence.road_evidence`),
     tile by tile, mosaicked from the tiles' cores.
 
@@ -302,11 +324,7 @@ def evidence_raster(path, *, tile_m: float = 300.0, overlap_m: float = 100.0,
 
     Returns
     -------
-    likelihood : GeoRaster or None
-        2-D, float32 in [0, 1], NaN outside the data, in the working metre CRS; None when no
-        tile holds ``min_points``.
-    used, missing : dict
-        Cue -> how it was measured, and cue -> why it was left out (first tile).
+    EvidenceMosaic
     """
     store = open_store(path, work_dir, tile_m=tile_m, overlap_m=overlap_m,
                        progress=scaled(progress, 0.0, 0.1))
@@ -321,7 +339,7 @@ def evidence_raster(path, *, tile_m: float = 300.0, overlap_m: float = 100.0,
 
 
 def _evidence_from_store(store: TileStore, *, cell_m, min_points, workers, scheduler,
-                         work_dir, progress, run) -> tuple[GeoRaster | None, dict, dict]:
+                         work_dir, progress, run) -> EvidenceMosaic:
     tiles = store.tiles
     if cell_m is None:
         cell_m = auto_cell_m(store.point_count, _covered_m2(tiles))
@@ -345,24 +363,32 @@ def _evidence_from_store(store: TileStore, *, cell_m, min_points, workers, sched
     report(progress, 1.0, "road evidence done")
     pieces = [(tile, r[0]) for tile, r in zip(tiles, results) if r is not None]
     if not pieces:
-        return None, {}, {}
+        return EvidenceMosaic(None, None, {}, {})
     _, _, used, missing = next(r for r in results if r is not None)
     mosaic = mosaic_cores(pieces, cell_m)
-    return GeoRaster(mosaic.data[0], mosaic.transform, mosaic.crs), used, missing
+    return EvidenceMosaic(*(GeoRaster(band, mosaic.transform, mosaic.crs)
+                            for band in mosaic.data), used, missing)
 
 
 def _evidence_roads(path, *, threshold: float, network_options: dict | None,
                     progress: Progress, **raster_options) -> LidarRoads:
     working, source = inputs_crs(las_inputs(path))
     run: dict = {}
-    likelihood, used, _ = evidence_raster(path, progress=scaled(progress, 0.0, 0.6),
-                                          _run=run, **raster_options)
+    likelihood, vehicles, used, _ = evidence_raster(
+        path, progress=scaled(progress, 0.0, 0.6), _run=run, **raster_options)
     if likelihood is None:
         network = ribbons_to_network(_no_lines(working), method=EVIDENCE_METHOD)
     else:
+        options = {**EVIDENCE_NETWORK_OPTIONS, **(network_options or {})}
         network = raster_to_network(likelihood, threshold=threshold, method=EVIDENCE_METHOD,
-                                    progress=scaled(progress, 0.6, 1.0),
-                                    **(network_options or {}))
+                                    progress=scaled(progress, 0.6, 0.8), **options)
+        # car-park aisles are known by the cars that line them: out, and the network again
+        likelihood, aisles = without_car_park_aisles(likelihood, network.centrelines,
+                                                     vehicles)
+        if len(aisles):
+            network = raster_to_network(likelihood, threshold=threshold,
+                                        method=EVIDENCE_METHOD,
+                                        progress=scaled(progress, 0.8, 1.0), **options)
     network.centrelines["cues"] = ",".join(used)
     network.polygons["level"] = np.zeros(len(network.polygons), np.int64)
     if source is not None and working is not None and source != working:
