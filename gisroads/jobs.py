@@ -205,6 +205,8 @@ def lidar_job(cloud_path, out_path, *, tagged_las=None, rasters_dir=None,
         raise ValueError(f"a tagged LAS/LAZ copy is made of one input file, not of "
                          f"{len(inputs)}: tag each file on its own")
     cloud_path = inputs[0] if len(inputs) == 1 else cloud_path
+    # the per-width likelihood maps of every tile are kept only to be written
+    options.setdefault("tile_maps", rasters_dir is not None)
     roads = extract_roads(cloud_path, progress=scaled(progress, 0.0, 0.85), **options)
     network = roads.network
     write_geopackage(out_path, network.layers())

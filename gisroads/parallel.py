@@ -104,18 +104,22 @@ def run_tasks(func: Callable, items: Sequence, *, workers: int = 1, scheduler: s
     else:
         client = Client(scheduler)
     try:
-        futures = [client.submit(single_threaded, func, item, pure=False) for item in items]
-        index = {f.key: i for i, f in enumerate(futures)}
+        live = {}
+        for i, item in enumerate(items):
+            future = client.submit(single_threaded, func, item, pure=False)
+            live[future.key] = (i, future)
         results = [None] * len(items)
         done = 0
         try:
-            for future in as_completed(futures):
-                results[index[future.key]] = future.result()
+            for future in as_completed([f for _, f in live.values()]):
+                i, _ = live.pop(future.key)
+                results[i] = future.result()
+                future.release()  # the worker may forget it: memory of one task per worker
                 done += 1
                 report(progress, done / len(items), progress_message(done, len(items),
                                                                      started, what))
         except BaseException:
-            client.cancel(futures)
+            client.cancel([f for _, f in live.values()])
             raise
         return results
     finally:

@@ -228,6 +228,8 @@ class _TileJob:
     results: Path | None
     """Folder of finished tiles (None: nothing kept)."""
     references: object = None
+    tile_maps: bool = True
+    """Return the intensity cue's per-width likelihood maps (kept on disk either way)."""
 
 
 def _tile_result_path(job: _TileJob, tile: Tile) -> Path | None:
@@ -243,7 +245,7 @@ def _run_tile(job: _TileJob, tile: Tile):
     path = _tile_result_path(job, tile)
     if path is not None and path.exists():
         with open(path, "rb") as f:
-            return True, pickle.load(f)
+            return True, _trimmed(job, pickle.load(f))
     cloud = job.store.read(tile)
     result = None
     if cloud is not None and len(cloud) >= job.min_points:
@@ -262,7 +264,14 @@ def _run_tile(job: _TileJob, tile: Tile):
         with open(tmp, "wb") as f:
             pickle.dump(result, f, protocol=pickle.HIGHEST_PROTOCOL)
         os.replace(tmp, path)
-    return False, result
+    return False, _trimmed(job, result)
+
+
+def _trimmed(job: _TileJob, result):
+    """The result without the per-width likelihood maps unless ``job.tile_maps``."""
+    if isinstance(result, TileRoads) and not job.tile_maps:
+        result = replace(result, likelihood=[])
+    return result
 
 
 #: The sources a tile's result depends on (relative to the package).
@@ -404,7 +413,8 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
                   n_segments: int = 150, t_planar: float = 0.01, t_vert: float = 0.98,
                   threshold: float = EVIDENCE_THRESHOLD, network_options: dict | None = None,
                   min_points: int = 1000, workers: int = 1, scheduler: str | None = None,
-                  work_dir=None, progress: Progress = None) -> LidarRoads:
+                  work_dir=None, tile_maps: bool = True,
+                  progress: Progress = None) -> LidarRoads:
     """The road network of a point cloud, tile by tile.
 
     The input is read once: its points are bucketed into the tile grid on disk
@@ -440,6 +450,10 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
         modification time) and the parameters: a run stopped midway (Ctrl-C, a power cut)
         and started again reuses what was finished. By default a temporary folder,
         removed at the end.
+    tile_maps : bool
+        Keep every tile's per-width likelihood maps in ``LidarRoads.tiles`` (written by
+        ``gisroads lidar --rasters``); False drops them as tiles finish, which bounds the
+        memory of a city (about 9 MB per tile and ground level).
     Other parameters (``cue="intensity"``): see :func:`extract_tile`.
 
     Returns
@@ -471,7 +485,8 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
         options = dict(cell_m=cell_m, widths_m=tuple(widths_m), lengths_m=tuple(lengths_m),
                        n_segments=n_segments, t_planar=t_planar, t_vert=t_vert)
         job = _TileJob(store, "intensity", min_points, options, _results_folder(
-            store, work_dir, "intensity", {**options, "min_points": min_points}))
+            store, work_dir, "intensity", {**options, "min_points": min_points}),
+            tile_maps=tile_maps)
         run: dict = {}
         results = _run_tiles(job, tiles, workers=workers, scheduler=scheduler,
                              progress=scaled(progress, 0.1, 0.95), run=run)

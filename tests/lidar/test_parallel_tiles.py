@@ -64,6 +64,11 @@ def test_two_workers_give_the_network_of_one(cloud, in_process):
     assert len(in_process.network.centrelines) > 10
     np.testing.assert_array_equal(parallel.network.centrelines.width_m,
                                   in_process.network.centrelines.width_m)
+    # the per-width likelihood maps come back only when asked for (a city's memory)
+    assert sum(len(t.likelihood) for t in parallel.tiles) >= len(parallel.tiles)
+    lean = extract_roads(cloud, workers=2, tile_maps=False)
+    assert [len(t.likelihood) for t in lean.tiles] == [0] * 6
+    _same_geometries(lean.network.centrelines, in_process.network.centrelines)
     # the evidence cue too (its reference tile first, the others on the cluster)
     one = extract_roads(cloud, cue="evidence")
     two = extract_roads(cloud, cue="evidence", workers=2)
