@@ -8,7 +8,7 @@ export QT_QPA_PLATFORM := offscreen
 # 2 cores: OpenBLAS threads thrash under load (an NCut went from 4 s to 29 s)
 export OPENBLAS_NUM_THREADS := 1
 
-.PHONY: demo test test-core test-core-qgis test-qgis plugin bench setup setup-core
+.PHONY: demo test test-core test-core-qgis test-qgis plugin bench bench-city setup setup-core
 
 setup:
 	@scripts/setup.sh apt venv qgis
@@ -32,3 +32,8 @@ dist/gisroads_qgis.zip: scripts/build_plugin.sh metadata.txt $(shell git ls-file
 
 bench: setup-core
 	$(VENV)/python bench/run.py --out out/bench
+
+## bench-city: a synthetic city of 1 and 4 km² end to end with 1 and 2 workers (minutes)
+CITY_SIDES_KM ?= 1,2
+bench-city: setup-core
+	$(VENV)/python bench/run.py --out out/bench-city --city $(CITY_SIDES_KM)

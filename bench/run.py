@@ -45,6 +45,11 @@ imagery_real
 imagery_tile
     The imagery pipeline on a 1000 x 1000 synthetic RGB tile (0.3 m) on one core, per-stage
     seconds and scores against the scene's truth, beside the baseline.
+city
+    Only with ``--city`` (``make bench-city``): a synthetic city streamed to LAZ, end to end
+    with 1 and 2 workers (``bench/city.py``): wall and CPU time, seconds per km², peak memory
+    of the driver and of a worker, quality against the truth, and the ratios of time per km²
+    across sizes and of 1 over 2 workers.
 """
 from __future__ import annotations
 
@@ -641,6 +646,15 @@ def case_road_database_update(out: Path, seeds: int) -> dict:
             for figure, value in scores.items() if figure in ("recall", "precision")}
 
 
+def case_city(out: Path, sides_km, density: float, workers) -> dict:
+    """The synthetic city end to end with 1 and 2 workers (bench/city.py; only with --city)."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from city import measure, table
+
+    result = measure(out, sides_km=sides_km, density=density, workers=workers)
+    return {**result["ratios"], "table": table(result)}
+
+
 CASES = {"synth_cloud": case_synth_cloud, "evaluate": case_evaluate,
          "ground_planes": case_ground_planes, "lidar_tile": case_lidar_tile,
          "snakes_registration": case_snakes_registration,
@@ -648,7 +662,7 @@ CASES = {"synth_cloud": case_synth_cloud, "evaluate": case_evaluate,
          "lidar_real": case_lidar_real, "imagery_real": case_imagery_real,
          "imagery_tile": case_imagery_tile, "vectorize_masks": case_vectorize_masks,
          "vectorize_large": case_vectorize_large,
-         "road_database_update": case_road_database_update}
+         "road_database_update": case_road_database_update, "city": case_city}
 
 
 def run_case(name: str, out: Path, params: dict) -> dict:
@@ -667,6 +681,9 @@ def main() -> None:
     parser.add_argument("--case", choices=sorted(CASES), help="run one case (internal)")
     parser.add_argument("--params", default="{}")
     parser.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
+    parser.add_argument("--city", default=None, metavar="SIDES_KM",
+                        help="run only the city case (make bench-city) at these city sides, "
+                             "km, e.g. 1,2 (1 and 4 km²)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     if args.case:
@@ -695,6 +712,9 @@ def main() -> None:
                                                 / "data" / "imagery"),
                                 "size_px": 2000 if args.quick else 5000},
             "road_database_update": {"seeds": 3 if args.quick else 10}}
+    if args.city:  # make bench-city: the city case alone, never in make bench
+        plan = {"city": {"sides_km": [float(v) for v in args.city.split(",")],
+                         "density": 10.0, "workers": [1, 2]}}
     results = {}
     for name, params in plan.items():
         print(f"running {name} {params} ...", flush=True)
