@@ -226,9 +226,22 @@ def cmd_image(args) -> int:
     from .jobs import image_job
     result = image_job(args.input, args.out, nir_band=args.nir_band, red_band=args.red_band,
                        dsm_path=args.dsm, pixel_m=args.pixel, crs=args.crs,
-                       quicklook=args.quicklook, progress=_ProgressBar(not args.json),
+                       quicklook=args.quicklook, model=args.model,
+                       probability_path=args.probability,
+                       **({"method": args.method} if args.method else {}),
+                       progress=_ProgressBar(not args.json),
                        **({"n_segments": args.segments} if args.segments else {}))
     _print(_then_compare(args, result), args.json)
+    return 0
+
+
+def cmd_train(args) -> int:
+    from .jobs import train_job
+    result = train_job(args.image, args.roads, args.out, width_field=args.width_field,
+                       width_m=args.width, guard_m=args.guard, pixel_m=args.pixel,
+                       crs=args.crs, samples=args.samples, seed=args.seed,
+                       progress=_ProgressBar(not args.json))
+    _print(result, args.json)
     return 0
 
 
@@ -459,9 +472,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="longest graph edge in metres (default 80, as in the paper)")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the blocks")
 
-    p = add("image", cmd_image, "extract roads from an aerial image (Grote & Rottensteiner)",
-            "Extract the road network of an aerial image (RGB, CIR or panchromatic GeoTIFF; "
-            "a NIR band and a DSM are used when given): normalized-cut over-segmentation, "
+    p = add("image", cmd_image, "extract roads from an aerial image (learned cue; "
+                                "Grote & Rottensteiner)",
+            "Extract the road network of an aerial image (RGB, CIR or panchromatic GeoTIFF). "
+            "By default a learned road probability (the bundled model, adapted to the image; "
+            "--model) goes through the network stage of 'gisroads vectorize'. With --model "
+            "none, or --method grote-rottensteiner, the papers' pipeline (a NIR band and a "
+            "DSM are used when given): normalized-cut over-segmentation, "
             "grouping of segments, road-part shape filtering, linking of road parts with an "
             "integer program over the gaps, junction construction and network significance "
             "checks. Writes road centre lines with widths (and the cues used), road "
@@ -480,7 +497,48 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--crs", help="projected CRS for an image without georeferencing, "
                                  "e.g. EPSG:32633")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
+    p.add_argument("--model", default="default",
+                   help="learned road cue (beyond the papers): 'default' (the bundled model, "
+                        "the default), a model file written by 'gisroads train' (.npz), or "
+                        "'none' (the papers' pipeline alone)")
+    p.add_argument("--method", choices=("learned-probability", "grote-rottensteiner"),
+                   help="with a model: its probability alone through the network stage "
+                        "(learned-probability, the default: the better on the benchmark) or "
+                        "the papers' stages with the probability as road-part criterion "
+                        "and gap context (grote-rottensteiner); without a model always the "
+                        "papers' stages")
+    p.add_argument("--probability", type=Path,
+                   help="also write the road probability of the model as a GeoTIFF (.tif)")
     add_database_options(p)
+
+    p = add("train", cmd_train, "train a road model on an image from a road layer",
+            "Train the learned road cue on your own image from an existing road layer over "
+            "it (e.g. last year's road database or OpenStreetMap): roads are rasterised at "
+            "their width, pixels in the core half of a road are road samples, pixels beyond "
+            "the road plus a guard band are non-road samples (the guard absorbs lines a few "
+            "metres off); gradient-boosted trees (scikit-learn) on multiscale features in "
+            "metres. Writes a model archive (.npz) for 'gisroads image --model'. Roads "
+            "missing from the layer fall among the non-road samples, a few per cent of "
+            "them, which the model tolerates.")
+    p.add_argument("image", type=Path, help="GeoTIFF (or PNG/JPEG with --pixel and --crs)")
+    p.add_argument("roads", type=Path, help="road centre lines (GeoPackage, GeoJSON, any OGR "
+                                            "line layer, any CRS)")
+    p.add_argument("-o", "--out", type=Path, required=True, help="output model (.npz)")
+    p.add_argument("--width-field", help="field of the road layer holding each road's width "
+                                         "in metres (empty values take --width)")
+    p.add_argument("--width", type=_positive, default=6.0,
+                   help="road width in metres where no width field or value is given "
+                        "(default 6)")
+    p.add_argument("--samples", type=int, default=100_000,
+                   help="pixels sampled from the image, half of them road (default 100000)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--guard", type=float, default=5.0,
+                   help="guard band beyond the road edge, metres, with no non-road sample "
+                        "(default 5: OpenStreetMap lines are often 2-5 m off)")
+    p.add_argument("--pixel", type=_positive,
+                   help="pixel size in metres, for an image without georeferencing")
+    p.add_argument("--crs", help="projected CRS for an image without georeferencing, "
+                                 "e.g. EPSG:32633")
 
     p = add("vectorize", cmd_vectorize, "any road raster (mask or probability) to a network",
             "Turn a road raster (a binary mask, or a road probability 0-1 or 0-255: a "
@@ -535,7 +593,8 @@ def build_parser() -> argparse.ArgumentParser:
 #: ``-o/--out`` names a folder for the commands in _FOLDER_OUT, a GeoPackage for the others.
 _OUTPUTS = {"out": (".gpkg",), "qa": (".gpkg",), "changes": (".gpkg",),
             "tagged_las": (".las", ".laz"), "attractor": (".tif", ".tiff"),
-            "quicklook": (".png",), "rasters": None, "work_dir": None}
+            "quicklook": (".png",), "rasters": None, "work_dir": None,
+            "probability": (".tif", ".tiff")}
 _FOLDER_OUT = {"synth", "demo"}
 
 
@@ -554,6 +613,8 @@ def check_outputs(args) -> None:
                 raise ValueError(f"{option} {path}: is a file; give a folder")
             _check_writable(path, f"{option} {path}")
             continue
+        if dest == "out" and args.command == "train":
+            suffixes = (".npz",)
         if path.suffix.lower() not in suffixes:
             raise ValueError(f"{option} {path}: must end in {' or '.join(suffixes)}")
         if path.is_dir():

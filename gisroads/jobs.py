@@ -611,19 +611,71 @@ def read_image(path, *, pixel_m: float | None = None, crs=None) -> tuple[GeoRast
     return warped, raster.crs
 
 
+def train_job(image_path, roads_path, out_path, *, width_field: str | None = None,
+              width_m: float = 6.0, guard_m: float = 5.0, pixel_m: float | None = None,
+              crs=None, samples: int = 100_000, seed: int = 0,
+              progress: Progress = None) -> dict:
+    """Train a road model on an image from a road layer over it (the agency's update case).
+
+    Roads (any OGR line layer or a GeoDataFrame, any CRS; a gisroads GeoPackage's
+    road_centrelines) are
+    rasterised at their width (``width_field``, metres; empty or missing values and layers
+    without the field take ``width_m``): positives in the core half of each road, negatives
+    beyond ``width / 2 + guard_m`` (misregistered lines), calibrated to the image's road
+    share (:func:`gisroads.learn.train_from_layer`). Writes the model archive ``out_path``
+    (.npz), to give to ``image_job(..., model=out_path)``. Needs scikit-learn.
+    """
+    from .learn.model import save_model, with_metadata
+    from .learn.training import train_from_layer
+
+    image, _ = read_image(image_path, pixel_m=pixel_m, crs=crs)
+    roads = _map_lines(roads_path)
+    if roads.crs is None and image.crs is not None:
+        raise ValueError(f"{roads_path}: the road layer has no CRS; cannot place it on the "
+                         "image")
+    if width_field is not None and width_field not in roads.columns:
+        raise ValueError(f"{roads_path}: no field {width_field!r} (fields: "
+                         f"{', '.join(c for c in roads.columns if c != 'geometry')})")
+    if width_m <= 0 or guard_m < 0:
+        raise ValueError("the width must be positive and the guard band at least 0 m")
+    try:
+        import sklearn  # noqa: F401
+    except ImportError:
+        raise ValueError("training needs scikit-learn (pip install scikit-learn, or the "
+                         "python3-sklearn package)") from None
+    report(progress, 0.0, "sampling the image along the roads")
+    model = train_from_layer(image, roads, width_field=width_field, default_width_m=width_m,
+                             guard_m=guard_m, samples=samples, seed=seed, road_share="layer",
+                             progress=scaled(progress, 0.05, 0.95))
+    model = with_metadata(model, image=Path(image_path).name, width_field=width_field,
+                          roads=(Path(roads_path).name if not isinstance(
+                              roads_path, gpd.GeoDataFrame) else "layer"))
+    path = save_model(model, out_path)
+    report(progress, 1.0, "done")
+    return {"model": path, "samples": model.metadata["samples"],
+            "trees": len(model.roots), "road_share": model.metadata["calibrated_road_share"],
+            "roads": len(roads)}
+
+
 def image_job(image_path, out_path, *, nir_band: int | None = None,
               red_band: int | None = None, dsm_path=None, pixel_m: float | None = None,
-              crs=None, quicklook=None, progress: Progress = None, **options) -> dict:
-    """Grote & Rottensteiner's road extraction of an aerial image into a GeoPackage.
+              crs=None, quicklook=None, model="default", probability_path=None,
+              progress: Progress = None, **options) -> dict:
+    """Road extraction of an aerial image into a GeoPackage: Grote & Rottensteiner's stages
+    with a learned road cue (see :func:`gisroads.imagery.pipeline.extract_image_roads`).
 
     Writes ``out_path`` with road_centrelines (width_m, and ``cues``: which of rgb/cir/pan,
-    nir and dsm were used), road_polygons, junctions and the QA layers segments,
-    road_parts, gap_edges and junction_connections, in the image's CRS; optionally a
-    ``quicklook`` PNG. ``options`` go to
-    :func:`gisroads.imagery.pipeline.extract_image_roads`. An image without roads gives
-    empty layers and a :class:`~gisroads.errors.NoRoadFoundWarning`.
+    nir, dsm and model were used), road_polygons, junctions and the QA layers (segments,
+    road_parts, gap_edges and junction_connections for the papers' stages), in the image's
+    CRS; optionally a ``quicklook`` PNG and ``probability_path``, the learned road
+    probability as a float32 GeoTIFF (band ``road_probability``, 0-1, NaN no data) on the
+    grid the image was worked on (its UTM zone for a geographic image). ``model``:
+    ``"default"``, a model file of :func:`train_job`, or ``"none"`` (the papers' pipeline
+    alone). ``options`` go to :func:`gisroads.imagery.pipeline.extract_image_roads`. An
+    image without roads gives empty layers and a
+    :class:`~gisroads.errors.NoRoadFoundWarning`.
     """
-    from .imagery.pipeline import extract_image_roads
+    from .imagery.pipeline import extract_image_roads, resolve_model
 
     image, source_crs = read_image(image_path, pixel_m=pixel_m, crs=crs)
     band_count = image.data.shape[0] if image.data.ndim == 3 else 1
@@ -631,9 +683,12 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
         if band is not None and not 1 <= band <= band_count:
             raise ValueError(f"{image_path}: no {name} band {band} (the image has "
                              f"{band_count} band(s))")
+    model = resolve_model(model)
+    if probability_path is not None and model is None:
+        raise ValueError("a road probability raster needs a model (not --model none)")
     dsm = read_raster(dsm_path) if dsm_path is not None else None
     roads = extract_image_roads(image, nir_band=nir_band, red_band=red_band, dsm=dsm,
-                                progress=scaled(progress, 0.0, 0.95), **options)
+                                model=model, progress=scaled(progress, 0.0, 0.95), **options)
     network = roads.network
     layers = network.layers()
     if source_crs is not None and source_crs != image.crs:
@@ -643,11 +698,15 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     result = {"gpkg": Path(out_path), "roads": len(network.centrelines),
               "length_m": float(network.centrelines.length_m.sum()),
               "junctions": len(network.junctions), "cues": roads.report["cues"]["cues"],
-              "timings_s": roads.report["timings_s"]}
+              "method": roads.report["method"], "timings_s": roads.report["timings_s"]}
+    if probability_path is not None:
+        result["probability"] = write_geotiff(probability_path, roads.report["probability"],
+                                              band_names=["road_probability"])
     if quicklook is not None:
         report(progress, 0.97, "drawing the quick-look")
+        parts = network.qa.get("road_parts", network.qa.get("rejected"))
         write_quicklook(quicklook, [
-            (network.qa["road_parts"], dict(color="orange", linewidth=1, label="road parts")),
+            (parts, dict(color="orange", linewidth=1, label="road parts")),
             (network.qa["gap_edges"].query("selected"),
              dict(color="cyan", linewidth=1.5, label="selected gaps")),
             (network.centrelines, dict(color="red", linewidth=1.5, label="road centre lines")),

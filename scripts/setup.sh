@@ -13,6 +13,8 @@ mkdir -p "$STAMPS"
 APT_PACKAGES=(qgis python3-qgis qgis-providers python3-skimage python3-geopandas python3-rasterio
   python3-sklearn python3-pulp python3-pytest python3-pip python3-venv coinor-cbc libgeos-dev build-essential
   python3-dev proj-data python3-tqdm
+  # BLAS/OpenMP threads pinned inside the library (gisroads.imagery.pipeline.pinned_threads)
+  python3-threadpoolctl
   # the QGIS desktop in a virtual display, for the plugin's start-up test
   xvfb xauth
   # tiles as tasks on Dask (gisroads.parallel)

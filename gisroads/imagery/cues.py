@@ -355,6 +355,10 @@ class ImageCues:
         there is no NIR band).
     saturation : ndarray or None
         :func:`saturation` of bands 1-3, for the same images as ``exg``.
+    probability : ndarray or None
+        A learned road probability in [0, 1] (:func:`gisroads.learn.predict_probability`),
+        NaN where unknown; when given it replaces the colour tests of the road parts and the
+        radiometric context of the gaps (beyond the papers).
     """
 
     bands: np.ndarray
@@ -365,11 +369,16 @@ class ImageCues:
     nir_band: int | None = None
     exg: np.ndarray | None = None
     saturation: np.ndarray | None = None
+    probability: np.ndarray | None = None
 
     def record(self) -> dict:
         """What a run used (see :func:`cues_used`)."""
-        return _record(len(self.bands), self.nir_band, self.ndvi is not None,
-                       self.ndsm is not None)
+        record = _record(len(self.bands), self.nir_band, self.ndvi is not None,
+                         self.ndsm is not None)
+        if self.probability is not None:  # a learned road probability (gisroads.learn)
+            record["cues"] += "+model"
+            record["model"] = True
+        return record
 
 
 def _record(band_count: int, nir_band: int | None, ndvi: bool, dsm: bool) -> dict:

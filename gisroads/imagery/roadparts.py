@@ -73,7 +73,8 @@ SEGMENT_COLUMNS = ["segment_id", "area_m2", "perimeter_m", "elongation", "convex
                    "width_m", "width_constancy", "length_m", "direction_rad",
                    "mean_intensity", "std_intensity", "edge_contrast", "ndvi", "excess_green",
                    "saturation", "height_m"]
-"""Attributes of :func:`measure_segments` (then ``mean_b1``, ``mean_b2`` ...)."""
+"""Attributes of :func:`measure_segments` (then ``road_probability``, ``mean_b1``,
+``mean_b2`` ...)."""
 
 CRITERIA = {
     "width_range_m": (3.0, 16.0),
@@ -91,12 +92,13 @@ CRITERIA = {
     "intensity_std_max": 0.2,
     "edge_contrast_min": 0.0,
     "road_width_m": 7.0,
+    "probability_min": 0.3,
 }
 """Defaults of :func:`filter_road_parts` (see there for their sources)."""
 
 TESTS = ("not elongated", "not convex", "too narrow", "too wide", "irregular width",
          "too short", "too high", "vegetation", "too dark", "too bright", "textured",
-         "coloured", "no border edges")
+         "coloured", "no border edges", "low road probability")
 """Failure reasons in the order they are tested; ``reason`` names the first that fails."""
 
 
@@ -353,6 +355,8 @@ def _measure(labels: np.ndarray, cues: ImageCues, edges: np.ndarray, transform: 
                       ("saturation", cues.saturation), ("height_m", cues.ndsm)):
         frame[name] = np.full(n, np.nan) if cue is None else \
             _group_stats(index, cue[valid].astype(float), n, std=False)
+    frame["road_probability"] = np.full(n, np.nan) if cues.probability is None else \
+        _group_stats(index, cues.probability[valid].astype(float), n, std=False)
     for band, values in enumerate(cues.bands, start=1):
         frame[f"mean_b{band}"] = _group_stats(index, values[valid].astype(float), n,
                                               std=False)
@@ -367,7 +371,7 @@ def _measure(labels: np.ndarray, cues: ImageCues, edges: np.ndarray, transform: 
     centrelines = shapely.simplify(centrelines, 0.5 * pixel_m)
     # the smoothed line, not the 8-connected pixel path (7 % too long at 30 degrees)
     frame["length_m"] = shapely.length(centrelines)
-    columns = SEGMENT_COLUMNS + [f"mean_b{band}" for band in range(1, len(cues.bands) + 1)]
+    columns = SEGMENT_COLUMNS + ["road_probability"] + [f"mean_b{band}" for band in range(1, len(cues.bands) + 1)]
     out = gpd.GeoDataFrame({c: frame[c] for c in columns},
                            geometry=gpd.GeoSeries(polygons, crs=crs), crs=crs)
     out["centreline"] = gpd.GeoSeries(centrelines, crs=crs)
@@ -444,7 +448,7 @@ def measure_segments(labels, image: GeoRaster, *, ndvi=None, ndsm=None,
 def road_part_quality(segments: pd.DataFrame, *, road_width_m: float = 7.0,
                       width_range_m=(3.0, 16.0), ndvi_max: float = 0.2,
                       elongation_full: float = 140.0, constancy_full: float = 10.0,
-                      length_full_m: float = 100.0) -> np.ndarray:
+                      length_full_m: float = 100.0, probability=None) -> np.ndarray:
     """Quality of road parts in [0, 1]: the mean of five scores in [0, 1].
 
     Grote & Rottensteiner (2010, end of Section 2.1.3) compute it "from the elongation,
@@ -456,7 +460,9 @@ def road_part_quality(segments: pd.DataFrame, *, road_width_m: float = 7.0,
     * width constancy: 0 at 1 (the std as large as the mean), 1 from ``constancy_full`` on;
     * length: ``length_m / length_full_m``, at most 1;
     * NDVI: 0 at ``ndvi_max``, 1 from ``NDVI_SPAN`` below it on; left out where NDVI is
-      NaN (no NIR band).
+      NaN (no NIR band);
+    * learned road probability (``probability``, per segment, beyond the papers): its
+      value; left out where NaN or not given.
     """
     low, high = width_range_m
     width = segments["width_m"].to_numpy(float)
@@ -470,7 +476,11 @@ def road_part_quality(segments: pd.DataFrame, *, road_width_m: float = 7.0,
     ]
     shape = np.clip(np.nan_to_num(np.vstack(scores[:4]), nan=0.0), 0.0, 1.0)
     vegetation = np.clip(scores[4], 0.0, 1.0)  # stays NaN without NIR: left out of the mean
-    return np.nanmean(np.vstack([shape, vegetation[None]]), axis=0)
+    rows = [shape, vegetation[None]]
+    if probability is not None:
+        rows.append(np.clip(np.asarray(probability, float), 0.0, 1.0)[None])
+    with np.errstate(invalid="ignore"):
+        return np.nanmean(np.vstack(rows), axis=0)
 
 
 def filter_road_parts(segments: gpd.GeoDataFrame, *,
@@ -488,7 +498,8 @@ def filter_road_parts(segments: gpd.GeoDataFrame, *,
                       intensity_range=CRITERIA["intensity_range"],
                       intensity_std_max: float = CRITERIA["intensity_std_max"],
                       edge_contrast_min: float = CRITERIA["edge_contrast_min"],
-                      road_width_m: float = CRITERIA["road_width_m"]):
+                      road_width_m: float = CRITERIA["road_width_m"],
+                      probability_min: float = CRITERIA["probability_min"]):
     """Test every measured segment against the road-part criteria.
 
     Defaults: Grote et al. (2009), Table 1, where it gives a value (width 3-16 m, minimum
@@ -565,6 +576,12 @@ def filter_road_parts(segments: gpd.GeoDataFrame, *,
         0.133 (1.1: 0.295 / 0.205 / 0.138), no gain; raise it on textured scenes.
     road_width_m : float
         The typical road width the quality measure rewards (:func:`road_part_quality`).
+    probability_min : float
+        Smallest mean learned road probability (``road_probability``, measured when the
+        cues hold a model's probability, :mod:`gisroads.learn`; beyond the papers). Where a
+        segment has one, it replaces the colour tests of RGB images (the excess-green
+        vegetation test and the saturation test; the NDVI test of a NIR band stays) and
+        joins the quality measure; segments without one take the colour tests.
 
     Returns
     -------
@@ -583,7 +600,7 @@ def filter_road_parts(segments: gpd.GeoDataFrame, *,
         saturation_max=saturation_max,
         intensity_range=intensity_range,
         intensity_std_max=intensity_std_max, edge_contrast_min=edge_contrast_min,
-        road_width_m=road_width_m)))
+        road_width_m=road_width_m, probability_min=probability_min)))
     return out, _road_part_layer(out)
 
 
@@ -600,6 +617,9 @@ def _verdict(segments: pd.DataFrame, criteria: dict) -> dict:
     if c["min_length_m"] <= 0:
         raise ValueError("min_length_m must be positive")
     s = {name: segments[name].to_numpy(float) for name in SEGMENT_COLUMNS[1:]}
+    probability = (segments["road_probability"].to_numpy(float)
+                   if "road_probability" in segments else np.full(len(segments), np.nan))
+    learned = np.isfinite(probability)  # a model's probability replaces the colour tests
     width = s["width_m"]
     needed = np.interp(s["elongation"], [c["elongation_min"], c["elongation_curved_min"]],
                        [c["convexity_min"], c["convexity_curved_min"]])
@@ -612,13 +632,15 @@ def _verdict(segments: pd.DataFrame, criteria: dict) -> dict:
         "too short": np.isnan(s["length_m"]) | (s["length_m"] < c["min_length_m"]),
         "too high": s["height_m"] > c["height_max_m"],
         # NDVI when there is NIR, else the excess green of RGB
-        "vegetation": np.where(np.isnan(s["ndvi"]), s["excess_green"] > c["excess_green_max"],
+        "vegetation": np.where(np.isnan(s["ndvi"]),
+                               ~learned & (s["excess_green"] > c["excess_green_max"]),
                                s["ndvi"] > c["ndvi_max"]),
-        "coloured": s["saturation"] > c["saturation_max"],
+        "coloured": ~learned & (s["saturation"] > c["saturation_max"]),
         "too dark": s["mean_intensity"] < low_i,
         "too bright": s["mean_intensity"] > high_i,
         "textured": s["std_intensity"] > c["intensity_std_max"],
         "no border edges": s["edge_contrast"] < c["edge_contrast_min"],
+        "low road probability": learned & (probability < c.get("probability_min", 0.0)),
     }
     fails = np.column_stack([failing[name] for name in TESTS]).reshape(-1, len(TESTS))
     names = np.array(TESTS, dtype=object)
@@ -627,6 +649,7 @@ def _verdict(segments: pd.DataFrame, criteria: dict) -> dict:
             "reason": np.where(passed, "", names[np.argmax(fails, axis=1)]).astype(object),
             "failures": np.array([", ".join(names[row]) for row in fails], dtype=object),
             "quality": road_part_quality(segments, road_width_m=c["road_width_m"],
+                                         probability=probability,
                                          width_range_m=c["width_range_m"],
                                          ndvi_max=c["ndvi_max"])}
 
@@ -639,6 +662,8 @@ def _road_part_layer(segments: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
              "segment_id": parts["segment_id"].to_numpy(np.int64)}
     for column in ["width_m", "length_m", "quality", *bands, "mean_intensity"]:
         frame[column] = parts[column].to_numpy(float)
+    if "road_probability" in parts:
+        frame["road_probability"] = parts["road_probability"].to_numpy(float)
     return gpd.GeoDataFrame(frame, geometry=gpd.GeoSeries(parts["centreline"].to_numpy(),
                                                          crs=segments.crs),
                             crs=segments.crs)
@@ -717,7 +742,7 @@ def _crop(cues: ImageCues, window) -> ImageCues:
         return None if cue is None else cue[..., rows, cols]
     return ImageCues(crop(cues.bands), crop(cues.intensity), crop(cues.ndvi), crop(cues.ndsm),
                      cues.kind, cues.nir_band, crop(cues.exg),
-                     crop(cues.saturation))
+                     crop(cues.saturation), crop(cues.probability))
 
 
 def merge_adjacent_parts(segments: gpd.GeoDataFrame, labels, image: GeoRaster,

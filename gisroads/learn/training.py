@@ -24,6 +24,7 @@ from rasterio import features as rio_features
 from scipy import ndimage
 
 from ..geo import GeoRaster
+from ..progress import Progress, report
 from . import features as ft
 from .model import RoadModel, WorkGrid, blend_models, fit_model, work_probability
 
@@ -40,8 +41,8 @@ def _sample(mask: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarra
 
 
 def grid_samples(grid: WorkGrid, positive: np.ndarray, negative: np.ndarray, count: int,
-                 rng: np.random.Generator, *, tile_px: int = 512
-                 ) -> tuple[np.ndarray, np.ndarray]:
+                 rng: np.random.Generator, *, tile_px: int = 512,
+                 progress: Progress = None) -> tuple[np.ndarray, np.ndarray]:
     """Balanced feature samples of a work grid: up to ``count / 2`` positive and as many
     negative pixels, drawn at random over the whole grid and computed tile by tile.
 
@@ -64,7 +65,9 @@ def grid_samples(grid: WorkGrid, positive: np.ndarray, negative: np.ndarray, cou
     neg = _sample(negative & ~positive, len(pos), rng)
     chosen.flat[pos], chosen.flat[neg] = 1, 2
     X, y = [], []
-    for r0, r1, c0, c1 in grid.tiles(tile_px):
+    tiles = list(grid.tiles(tile_px))
+    for k, (r0, r1, c0, c1) in enumerate(tiles):
+        report(progress, k / len(tiles), f"features of tile {k + 1} of {len(tiles)}")
         here = chosen[r0:r1, c0:c1]
         if not here.any():
             continue
@@ -238,7 +241,8 @@ def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
                      width_field: str | None = None, default_width_m: float = 6.0,
                      guard_m: float = 5.0, core_fraction: float = 0.5,
                      samples: int = 100_000, base_samples=None, seed: int = 0,
-                     tile_px: int = 512, **fit_params) -> RoadModel:
+                     tile_px: int = 512, road_share=None, progress: Progress = None,
+                     **fit_params) -> RoadModel:
     """Train a road model on an image from a road layer over it.
 
     Parameters
@@ -268,6 +272,14 @@ def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
     seed : int
     tile_px : int
         Work-grid tile side of the feature computation.
+    road_share : "layer", float or None
+        Share of road pixels the probabilities are calibrated to (see
+        :func:`~gisroads.learn.model.fit_model`): ``"layer"``, the share of the image
+        within the roads' half width (at least 1 %, at most 50 %), so that thresholds mean
+        what they mean for the default model (``gisroads train`` does this); None (default)
+        leaves the balanced samples' prior of 0.5.
+    progress : callable, optional
+        ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
     **fit_params
         Passed to :func:`~gisroads.learn.model.fit_model`.
 
@@ -282,14 +294,27 @@ def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
                                       core_fraction=core_fraction)
     if not positive.any():
         raise ValueError("no road of the layer lies on the image")
+    if isinstance(road_share, str):
+        if road_share != "layer":
+            raise ValueError(f"road_share must be 'layer', a share or None, not {road_share!r}")
+        surface, _ = layer_labels(grid, roads, width_m=width_m, width_field=width_field,
+                                  default_width_m=default_width_m, guard_m=guard_m,
+                                  core_fraction=1.0)
+        road_share = float(np.clip(surface.mean(), 0.01, 0.5))
     rng = np.random.default_rng(seed)
-    X, y = grid_samples(grid, positive, negative, samples, rng, tile_px=tile_px)
+    report(progress, 0.0, "sampling road and non-road pixels")
+    X, y = grid_samples(grid, positive, negative, samples, rng, tile_px=tile_px,
+                        progress=None if progress is None else
+                        (lambda f, m: progress(0.8 * f, m)))
     if base_samples is not None:
         X = np.concatenate([X, np.asarray(base_samples[0], np.float32)], axis=1)
         y = np.concatenate([y, np.asarray(base_samples[1], bool)])
     meta = {"trained_on": "road layer", "guard_m": guard_m, "core_fraction": core_fraction,
             "default_width_m": default_width_m, "base_samples": base_samples is not None}
-    return fit_model(X, y, seed=seed, metadata=meta, **fit_params)
+    report(progress, 0.8, f"fitting the model on {len(y)} samples")
+    model = fit_model(X, y, seed=seed, metadata=meta, road_share=road_share, **fit_params)
+    report(progress, 1.0, "model trained")
+    return model
 
 
 def elongated(mask: np.ndarray, pixel_m: float, *, min_length_m: float = 30.0,

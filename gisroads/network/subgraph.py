@@ -709,8 +709,41 @@ def road_strings(road_parts: gpd.GeoDataFrame, gaps: gpd.GeoDataFrame) -> gpd.Ge
     return gpd.GeoDataFrame(frame, geometry=geometries, crs=road_parts.crs)
 
 
+def mean_along(values: np.ndarray, transform: Affine, lines, step_m: float) -> np.ndarray:
+    """Per line, the mean of a raster at points every ``step_m`` along it (NaN and points
+    off the raster count 0)."""
+    points, owner = shapely.get_coordinates(shapely.segmentize(lines, step_m),
+                                            return_index=True)
+    inverse = ~transform
+    cols = inverse.a * points[:, 0] + inverse.b * points[:, 1] + inverse.c
+    rows = inverse.d * points[:, 0] + inverse.e * points[:, 1] + inverse.f
+    rows, cols = np.floor(rows).astype(np.int64), np.floor(cols).astype(np.int64)
+    inside = (rows >= 0) & (rows < values.shape[0]) & (cols >= 0) & (cols < values.shape[1])
+    sampled = np.zeros(len(points))
+    sampled[inside] = np.nan_to_num(values[rows[inside], cols[inside]])
+    return (np.bincount(owner, weights=sampled, minlength=len(lines))
+            / np.maximum(np.bincount(owner, minlength=len(lines)), 1))
+
+
+def _probability_context(gaps, transform, probability, ndsm, context_options, progress):
+    """Gap context from a learned road probability (and buildings, vehicles from an nDSM)."""
+    if ndsm is not None:
+        gaps = gap_context(gaps, transform=transform, ndsm=ndsm, progress=progress,
+                           **(context_options or {}))
+        gaps["context_cues"] = "ndsm,probability"
+    else:
+        gaps = gaps.copy()
+        gaps["context_cues"] = "probability"
+    for kind in ("building", "vehicle", "tree", "vegetated_area", "shadow", "asphalt"):
+        if ndsm is None or kind not in ("building", "vehicle"):
+            gaps[f"n_{kind}"] = 0.0
+    gaps["occlusion"] = (mean_along(probability, transform, gaps.geometry.values,
+                                    abs(transform.a)) if len(gaps) else np.empty(0))
+    return gaps
+
+
 def link_road_parts(road_parts: gpd.GeoDataFrame, *, transform: Affine | None = None,
-                    ndvi=None, ndsm=None, intensity=None, rgb=None,
+                    ndvi=None, ndsm=None, intensity=None, rgb=None, probability=None,
                     gap_options: dict | None = None, context_options: dict | None = None,
                     weight_options: dict | None = None, progress: Progress = None):
     """Subgraph generation and evaluation in one call: :func:`gap_edges`, :func:`gap_context`
@@ -723,6 +756,12 @@ def link_road_parts(road_parts: gpd.GeoDataFrame, *, transform: Affine | None = 
         As for :func:`gap_edges`.
     transform, ndvi, ndsm, intensity, rgb
         Context rasters, as for :func:`gap_context`.
+    probability : array_like, optional
+        A learned road probability on the same grid (beyond the papers): a gap's
+        ``occlusion`` becomes the mean probability along it (as
+        :func:`gisroads.network.rasters.link_gaps` does) and the radiometric categories
+        (trees, vegetated areas, shadow, asphalt) are left out; buildings and vehicles
+        still come from the nDSM when given.
     gap_options, context_options, weight_options : dict, optional
         Keyword arguments of :func:`gap_edges`, :func:`gap_context`, :func:`edge_weights`.
     progress : callable, optional
@@ -736,7 +775,12 @@ def link_road_parts(road_parts: gpd.GeoDataFrame, *, transform: Affine | None = 
     """
     report(progress, 0.0, "linking road parts")
     gaps = gap_edges(road_parts, **(gap_options or {}))
-    if any(r is not None for r in (ndvi, ndsm, intensity, rgb)):
+    if probability is not None:
+        if transform is None:
+            raise ValueError("the probability raster needs its transform")
+        gaps = _probability_context(gaps, transform, np.asarray(probability, float), ndsm,
+                                    context_options, scaled(progress, 0.1, 0.8))
+    elif any(r is not None for r in (ndvi, ndsm, intensity, rgb)):
         if transform is None:
             raise ValueError("context rasters need their transform")
         gaps = gap_context(gaps, transform=transform, ndvi=ndvi, ndsm=ndsm,

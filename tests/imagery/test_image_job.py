@@ -34,7 +34,7 @@ def image_files(tmp_path_factory):
 
 def test_image_command_writes_every_layer_with_the_cues_used(image_files, tmp_path):
     result = gisroads("image", image_files / "image.tif", "-o", tmp_path / "roads.gpkg",
-                      "--nir-band", 4, "--dsm", image_files / "dsm.tif",
+                      "--nir-band", 4, "--dsm", image_files / "dsm.tif", "--model", "none",
                       "--quicklook", tmp_path / "roads.png", "--json")
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
@@ -111,7 +111,7 @@ def test_a_cancelled_job_leaves_no_output(image_files, tmp_path):
             raise Cancelled
 
     with pytest.raises(Cancelled):
-        image_job(image_files / "image.tif", tmp_path / "roads.gpkg",
+        image_job(image_files / "image.tif", tmp_path / "roads.gpkg", model="none",
                   progress=cancel_in_grouping)
     assert any("grouping" in message for message in seen)
     assert list(tmp_path.iterdir()) == []

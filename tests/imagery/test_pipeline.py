@@ -19,7 +19,8 @@ def scene_images():
 @pytest.fixture(scope="module")
 def rgb_roads(scene_images):
     _, image, _ = scene_images
-    return extract_image_roads(GeoRaster(image.data[:3], image.transform, image.crs))
+    return extract_image_roads(GeoRaster(image.data[:3], image.transform, image.crs),
+                               model=None)
 
 
 def test_rgb_image_gives_the_contract_and_the_qa_layers(rgb_roads, scene_images):
@@ -47,7 +48,7 @@ def test_rgb_roads_of_the_scene(rgb_roads, scene_images):
 
 def test_nir_and_dsm_are_used_and_recorded(scene_images):
     scene, image, dsm = scene_images
-    roads = extract_image_roads(image, nir_band=4, dsm=dsm)
+    roads = extract_image_roads(image, nir_band=4, dsm=dsm, model=None)
     assert roads.report["cues"]["cues"] == "rgb+nir+dsm"
     assert (roads.network.centrelines.cues == "rgb+nir+dsm").all()
     segments = roads.network.qa["segments"]

@@ -314,3 +314,35 @@ def test_segment_polygons_back_to_labels():
         rasterize_segments(frame.rename(columns={"segment_id": "id"}), image)
     with pytest.raises(ValueError, match="another CRS"):
         rasterize_segments(frame.set_crs("EPSG:32634", allow_override=True), image)
+
+
+def test_learned_probability_replaces_the_colour_tests():
+    """With a model's probability, a red (coloured) strip the model calls road passes, a grey
+    strip it calls not road fails on 'low road probability'; without one, the colour tests."""
+    import dataclasses
+
+    _, red = _strip(75, 40, 8.0, 100.0, 0.0)
+    _, grey = _strip(75, 110, 8.0, 100.0, 0.0)
+    labels, image = _paint([(red, ROOF), (grey, ASPHALT)])
+    rgb = GeoRaster(image.data[:3], T, CRS)
+    cues = image_cues(rgb)
+    plain = extract_road_parts(labels, rgb, cues=cues)
+    assert _row(plain.segments, 1).reason == "coloured" and _row(plain.segments, 2).passed
+    assert np.isnan(_row(plain.segments, 1).road_probability)
+    probability = np.where(labels == 1, 0.8, 0.1).astype(np.float32)
+    learned = extract_road_parts(labels, rgb,
+                                 cues=dataclasses.replace(cues, probability=probability))
+    assert _row(learned.segments, 1).passed
+    assert _row(learned.segments, 1).road_probability == pytest.approx(0.8)
+    assert _row(learned.segments, 2).reason == "low road probability"
+    assert list(learned.road_parts.segment_id) == [1]
+    assert learned.road_parts.road_probability.iloc[0] == pytest.approx(0.8)
+    assert learned.cues["cues"] == "rgb+model"
+    # the probability joins the quality measure: the same strip at 0.4 scores lower
+    lower = extract_road_parts(labels, rgb, cues=dataclasses.replace(
+        cues, probability=np.where(labels == 1, 0.4, 0.1).astype(np.float32)))
+    assert lower.road_parts.quality.iloc[0] < learned.road_parts.quality.iloc[0]
+    # the threshold is a criterion like the others
+    strict = extract_road_parts(labels, rgb, probability_min=0.9,
+                                cues=dataclasses.replace(cues, probability=probability))
+    assert _row(strict.segments, 1).reason == "low road probability"

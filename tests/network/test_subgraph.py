@@ -414,3 +414,30 @@ def test_synthetic_scene_rgb_only_uses_colour_vegetation(scene_parts):
     assert gaps.context_cues.iloc[0] == "intensity,rgb"
     assert gaps.selected[true_link].sum() == n_true and not gaps.selected[false_link].any()
     assert (gaps.n_tree[true_link] > 0).sum() >= 5
+
+
+def test_learned_probability_along_the_gap_is_its_context():
+    """A road probability (beyond the papers): its mean along the gap is the occlusion share
+    and the context weight; the nDSM still adds buildings."""
+    parts = two_parts()
+    road = block(1.0, 38, 62, -3, 3)                 # the model sees road across the gap
+    gaps, strings = link_road_parts(parts, transform=GRID, probability=road)
+    assert gaps.occlusion[0] == pytest.approx(1.0) and gaps.context_weight[0] == 1.0
+    assert gaps.context_cues[0] == "probability" and gaps.n_tree[0] == 0
+    assert gaps.weight[0] == pytest.approx((gaps.relation_weight[0] + 1.0) / 2)
+    assert gaps.selected.tolist() == [True] and strings.part_ids.tolist() == ["1,2"]
+    half = block(1.0, 38, 50, -3, 3)                 # road on the first half only
+    gaps, _ = link_road_parts(parts, transform=GRID, probability=half)
+    assert gaps.occlusion[0] == pytest.approx(0.5, abs=0.1)
+    nothing, _ = link_road_parts(parts, transform=GRID, probability=np.zeros(SHAPE))
+    assert nothing.context_weight[0] == 0.0
+    assert nothing.weight[0] == pytest.approx(nothing.relation_weight[0] / 2)
+    # a building in the gap still blocks the link, whatever the model says
+    blocked, _ = link_road_parts(parts, transform=GRID, probability=road,
+                                 ndsm=block(8.0, 45, 55, -5, 5))
+    assert blocked.n_building[0] == 1 and blocked.context_cues[0] == "ndsm,probability"
+    assert blocked.weight[0] == 0.0 and blocked.selected.tolist() == [False]
+    # colour rasters are left out when the probability is given
+    crown = block(0.8, 38, 62, -6, 6)
+    lawn, _ = link_road_parts(parts, transform=GRID, ndvi=crown, probability=road)
+    assert lawn.n_tree[0] == 0 and lawn.selected.tolist() == [True]

@@ -12,7 +12,8 @@ from tests.road_layers import assert_empty_road_layers
 
 def test_imagery_road_network_uses_nir_and_dsm(qgis_process, scene_dir, tmp_path):
     result = qgis_process.run("imageryroadnetwork", INPUT=scene_dir / "image.tif", NIR_BAND=4,
-                              DSM=scene_dir / "dsm.tif", OUTPUT=tmp_path / "roads.gpkg")
+                              DSM=scene_dir / "dsm.tif", USE_MODEL="false",
+                              OUTPUT=tmp_path / "roads.gpkg")
     assert result["CUES"] == "rgb+nir+dsm" and result["ROADS"] > 0
     assert list_layers(tmp_path / "roads.gpkg")[:4] == ["road_centrelines", "road_polygons",
                                                         "junctions", "segments"]
