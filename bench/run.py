@@ -36,12 +36,15 @@ snakes
     truth polygons. Baseline: the map lines buffered by the true mean road width (what the
     map alone gives, with the width known).
 imagery_real
-    Every image of ../shared/data/imagery (gisroads.imagery.datasets) through the naive
-    threshold-morphology-skeleton baseline and the imagery pipeline: completeness,
-    correctness and quality per image and on average (buffer 3 m, Massachusetts 4 m, no-data
-    excluded), seconds, per-stage seconds, a quick-look per image and method in
-    OUT/imagery/, the table in OUT/imagery_real.md; also the mean scores of the pipeline's
-    road-part centre lines alone, before linking and network generation.
+    Every image of ../shared/data/imagery (gisroads.imagery.datasets) through every imagery
+    path: the naive threshold-morphology-skeleton baseline, the papers' pipeline without a
+    model, with the adapted default model's probability in its stages, and that probability
+    (plain and adapted) alone through raster_to_network at 0.3 / 0.4 / 0.5: completeness,
+    correctness and quality per image, per dataset and on average (buffer 3 m, Massachusetts
+    4 m, no-data excluded), the default model's held-out pixel AUC (plain, adapted),
+    seconds, per-stage seconds, quick-looks in OUT/imagery/, the tables in
+    OUT/imagery_real.md; also the papers' road-part centre lines alone. ``pipeline_*`` is the
+    default path of extract_image_roads.
 imagery_tile
     The imagery pipeline on a 1000 x 1000 synthetic RGB tile (0.3 m) on one core, per-stage
     seconds and scores against the scene's truth, beside the baseline.
@@ -286,28 +289,44 @@ def _image_baseline(image):
 _SCORES = ("completeness", "correctness", "quality")
 
 
-def _imagery_table(per_image: dict, methods) -> str:
-    """Markdown: per image and on average, each method's scores and seconds."""
-    head = "| image | pixel m | buffer m | " + " | ".join(
-        f"{m} {k}" for m in methods for k in ("C", "K", "Q", "s")) + " |"
-    lines = [head, "|" + "---|" * (3 + 4 * len(methods))]
+def _imagery_table(per_image: dict, methods, default_path: str) -> str:
+    """Markdown: per image, per dataset and on average, each path's completeness /
+    correctness / quality and seconds, and the default model's held-out pixel AUC."""
+    scored = {name: e for name, e in per_image.items() if e["scored"]}
+    lines = ["Quality per image (C / K / Q in the second table); AUC = held-out pixel AUC of "
+             "the default model, plain / adapted.", "",
+             "| image | AUC | AUC adapted | " + " | ".join(methods) + " |",
+             "|" + "---|" * (3 + len(methods))]
+
+    def row(label, entries):
+        cells = [f"{np.nanmean([e.get(k, np.nan) for e in entries]):.3f}"
+                 for k in ("auc", "auc_adapted")]
+        cells += [f"{np.nanmean([e.get(f'{m}_quality', np.nan) for e in entries]):.3f}"
+                  for m in methods]
+        return f"| {label} | " + " | ".join(cells) + " |"
+
     for name, entry in per_image.items():
-        cells = [f"{entry.get(f'{m}_{k}', float('nan')):.3f}" for m in methods
-                 for k in (*_SCORES, "s")]
-        label = name if entry["scored"] else f"{name} (edge case, unscored)"
-        lines.append(f"| {label} | {entry['pixel_m']} | {entry['buffer_m']} | "
-                     + " | ".join(cells) + " |")
-    scored = [e for e in per_image.values() if e["scored"]]
-    means = [f"{np.nanmean([e[f'{m}_{k}'] for e in scored]):.3f}" for m in methods
-             for k in (*_SCORES, "s")]
-    lines.append(f"| **mean of {len(scored)}** | | | " + " | ".join(means) + " |")
-    quality = {m: np.nanmean([e[f"{m}_quality"] for e in scored]) for m in methods}
-    parts = [np.nanmean([e[f"road_parts_{k}"] for e in scored]) for k in _SCORES]
-    lines += ["", f"Mean quality: pipeline {quality['pipeline']:.3f}, baseline "
-                  f"{quality['baseline']:.3f}, ratio "
-                  f"{quality['pipeline'] / quality['baseline']:.2f} (target >= 1.5).",
-              "", "The pipeline's road-part centre lines alone (before linking and network "
-                  "generation), mean C/K/Q: " + " / ".join(f"{v:.3f}" for v in parts) + "."]
+        lines.append(row(name if entry["scored"] else f"{name} (unscored)", [entry]))
+    datasets = list(dict.fromkeys(e["dataset"] for e in scored.values()))
+    for dataset in datasets:
+        lines.append(row(f"**{dataset}** ({sum(e['dataset'] == dataset for e in scored.values())})",
+                         [e for e in scored.values() if e["dataset"] == dataset]))
+    lines.append(row(f"**mean of {len(scored)}**", list(scored.values())))
+    lines += ["", "| path | C | K | Q | s | " + " | ".join(datasets) + " |",
+              "|" + "---|" * (5 + len(datasets))]
+    for m in methods:
+        mean = [np.nanmean([e.get(f"{m}_{k}", np.nan) for e in scored.values()])
+                for k in (*_SCORES, "s")]
+        per = [np.nanmean([e.get(f"{m}_quality", np.nan) for e in scored.values()
+                           if e["dataset"] == d]) for d in datasets]
+        lines.append(f"| {m} | " + " | ".join(f"{v:.3f}" for v in mean[:3])
+                     + f" | {mean[3]:.1f} | " + " | ".join(f"{v:.3f}" for v in per) + " |")
+    for m in ("papers", "papers_model"):
+        parts = [np.nanmean([e.get(f"{m}_road_parts_{k}", np.nan) for e in scored.values()])
+                 for k in _SCORES]
+        lines += ["", f"{m}: road-part centre lines alone (before linking and network "
+                      "generation), mean C/K/Q: " + " / ".join(f"{v:.3f}" for v in parts) + "."]
+    lines += ["", f"Default path of extract_image_roads / gisroads image: {default_path}."]
     stages = list(dict.fromkeys(k for e in per_image.values() for k in e
                                 if k.startswith("stage_")))
     if stages:
@@ -318,61 +337,141 @@ def _imagery_table(per_image: dict, methods) -> str:
     return "\n".join(lines) + "\n"
 
 
+IMAGERY_PATHS = ("baseline", "papers", "papers_model", "prob_0.3", "prob_0.4", "prob_0.5",
+                 "prob_adapted_0.3", "prob_adapted_0.4", "prob_adapted_0.5")
+"""Paths of :func:`case_imagery_real`: the naive baseline, the papers' pipeline without a
+model, with the adapted default model's probability (road-part criterion and gap context),
+and that probability alone through raster_to_network at three thresholds, not adapted and
+adapted."""
+_LOOKS = ("baseline", "papers", "papers_model", "prob_adapted_0.4")
+
+
+def _burn_shapes(shapes, raster):
+    from rasterio import features as rio_features
+
+    return rio_features.rasterize(((g, 1) for g in shapes), out_shape=raster.shape,
+                                  transform=raster.transform, fill=0,
+                                  dtype=np.uint8).astype(bool)
+
+
+def _imagery_paths(record):
+    """Every path of :data:`IMAGERY_PATHS` on one benchmark image: ``{path: (network,
+    seconds, timings)}``, and the held-out pixel AUC of the default and adapted model."""
+    from dataclasses import replace
+
+    import shapely
+
+    from gisroads.imagery.pipeline import PROBABILITY_METHOD, extract_image_roads
+    from gisroads.learn import adapt_to_image, load_model, predict_probability
+    from gisroads.learn.scores import pixel_auc
+
+    # Massachusetts declares its white fill as no-data, as a user gives it to the model
+    model_image = (replace(record.image, nodata=255) if record.dataset == "massachusetts"
+                   else record.image)
+    model = load_model()
+    probability, plain_s = _timed(predict_probability, model_image, model)
+    adapted, adapted_s = _timed(lambda: predict_probability(
+        model_image, adapt_to_image(model_image, model)))
+    valid = _burn_shapes([record.valid_area], record.image)
+    if record.truth_mask is not None:
+        road = np.asarray(record.truth_mask.data, bool)
+    else:  # OpenStreetMap lines only: a 3 m band around them
+        road = _burn_shapes(shapely.buffer(record.truth.geometry.values, 3.0), record.image)
+    auc = {"auc": pixel_auc(probability.data, road, valid),
+           "auc_adapted": pixel_auc(adapted.data, road, valid),
+           "probability_s": plain_s, "probability_adapted_s": adapted_s}
+    runs = {}
+    (network, _), seconds = _timed(_image_baseline, record.image)
+    runs["baseline"] = (network, seconds, {}, None)
+    roads, seconds = _timed(extract_image_roads, record.image, model=None)
+    runs["papers"] = (roads.network, seconds, roads.report["timings_s"], roads)
+    roads, seconds = _timed(extract_image_roads, record.image, probability=adapted,
+                            method="grote-rottensteiner")
+    runs["papers_model"] = (roads.network, seconds + adapted_s, roads.report["timings_s"],
+                            roads)
+    for name, raster, extra in (("prob", probability, plain_s),
+                                ("prob_adapted", adapted, adapted_s)):
+        for threshold in (0.3, 0.4, 0.5):
+            roads, seconds = _timed(extract_image_roads, record.image, probability=raster,
+                                    method=PROBABILITY_METHOD,
+                                    probability_threshold=threshold)
+            runs[f"{name}_{threshold}"] = (roads.network, seconds + extra, {}, None)
+    return runs, auc
+
+
 def case_imagery_real(out: Path, data_dir: str, datasets=None) -> dict:
-    """Every real benchmark image through the naive baseline and the imagery pipeline:
-    buffer scores against the truth, times, quick-looks; for the pipeline also the scores of
-    its road-part centre lines alone (before linking and network generation), which say
-    how much of the loss is in the choice of road parts."""
+    """Every real benchmark image through every path of :data:`IMAGERY_PATHS` (the naive
+    baseline, the papers' pipeline without and with the learned cue, the learned
+    probability alone through the shared network stage): buffer scores against the truth,
+    times, the held-out pixel AUC of the default model (plain and adapted), quick-looks;
+    for the papers' pipeline also the scores of its road-part centre lines alone (before
+    linking and network generation), which say how much of the loss is in the choice of
+    road parts. ``pipeline`` is what ``extract_image_roads`` does by default."""
     import geopandas as gpd
 
     from gisroads.evaluate import buffer_metrics, match_layers
+    from gisroads.imagery import pipeline as imagery_pipeline
     from gisroads.imagery.datasets import DATASETS, benchmark_images
-    from gisroads.imagery.pipeline import extract_image_roads
     from gisroads.io.quicklook import evaluation_layers, write_quicklook
 
-    # extract_image_roads returns (network, report), as the baseline does
-    methods = {"baseline": _image_baseline, "pipeline": extract_image_roads}
+    default_path = ("papers_model" if imagery_pipeline.DEFAULT_METHOD
+                    == imagery_pipeline.METHOD else
+                    f"prob_adapted_{imagery_pipeline.PROBABILITY_THRESHOLD}")
     looks = out / "imagery"
     looks.mkdir(exist_ok=True)
     per_image = {}
     for record in benchmark_images(data_dir, datasets=datasets or DATASETS):
-        entry = {"pixel_m": record.pixel_m, "buffer_m": record.buffer_m,
-                 "scored": record.scored, "truth_km": float(record.truth.length.sum() / 1000)}
+        entry = {"dataset": record.dataset, "pixel_m": record.pixel_m,
+                 "buffer_m": record.buffer_m, "scored": record.scored,
+                 "truth_km": float(record.truth.length.sum() / 1000)}
         valid = gpd.GeoDataFrame(geometry=[record.valid_area.boundary], crs=record.image.crs)
-        for method, run in methods.items():
-            (network, qa), seconds = _timed(run, record.image)
+        runs, auc = _imagery_paths(record)
+        entry.update(auc)
+        for method, (network, seconds, timings, _) in runs.items():
             lines = network.centrelines
             entry[f"{method}_s"] = seconds
             entry[f"{method}_km"] = float(lines.length.sum() / 1000)
-            if method == "pipeline":
-                entry.update({f"stage_{k}_s": v for k, v in qa.get("timings_s", {}).items()})
+            entry.update({f"stage_{method}_{k}_s": v for k, v in timings.items()
+                          if method in ("papers", "papers_model")})
             layers = [(valid, dict(color="cyan", linewidth=1, label="valid area"))]
             if record.scored:
                 match = dict(buffer_m=record.buffer_m, valid_area=record.valid_area)
                 scores = buffer_metrics(lines, record.truth, **match)
                 entry.update({f"{method}_{k}": getattr(scores, k) for k in _SCORES})
-                if method == "pipeline":
+                if method in ("papers", "papers_model"):
                     parts = buffer_metrics(network.qa["road_parts"], record.truth, **match)
-                    entry.update({f"road_parts_{k}": getattr(parts, k) for k in _SCORES})
-                layers += evaluation_layers(match_layers(lines, record.truth, **match))
+                    entry.update({f"{method}_road_parts_{k}": getattr(parts, k)
+                                  for k in _SCORES})
+                if method in _LOOKS:
+                    layers += evaluation_layers(match_layers(lines, record.truth, **match))
                 title = (f"{record.name} {method}: completeness {scores.completeness:.2f}, "
                          f"correctness {scores.correctness:.2f}, quality {scores.quality:.2f}")
             else:
                 layers.append((lines, dict(color="magenta", linewidth=1.5, label=method)))
                 title = f"{record.name} {method} ({record.note})"
-            write_quicklook(looks / f"{record.name.replace('/', '_')}_{method}.png", layers,
-                            background=record.image, title=title)
+            if method in _LOOKS:
+                write_quicklook(looks / f"{record.name.replace('/', '_')}_{method}.png",
+                                layers, background=record.image, title=title)
+        for key in [k for k in entry if k.startswith(default_path + "_")]:
+            entry["pipeline" + key[len(default_path):]] = entry[key]
         per_image[record.name] = entry
+        print(record.name, " ".join(f"{m} {entry.get(m + '_quality', float('nan')):.3f}"
+                                    for m in IMAGERY_PATHS), flush=True)
     scored = [e for e in per_image.values() if e["scored"]]
-    result = {"images_scored": len(scored)}
-    for method, keys in (("baseline", (*_SCORES, "s")), ("pipeline", (*_SCORES, "s")),
-                         ("road_parts", _SCORES)):
-        for key in keys:
+    result = {"images_scored": len(scored), "default_path": default_path}
+    for method in ("pipeline", *IMAGERY_PATHS):
+        for key in (*_SCORES, "s"):
             result[f"{method}_mean_{key}"] = float(np.nanmean([e[f"{method}_{key}"]
                                                               for e in scored]))
+    for method in ("papers", "papers_model"):
+        for key in _SCORES:
+            result[f"{method}_road_parts_mean_{key}"] = float(np.nanmean(
+                [e[f"{method}_road_parts_{key}"] for e in scored]))
+    for key in ("auc", "auc_adapted"):
+        result[f"mean_{key}"] = float(np.nanmean([e[key] for e in scored]))
     result["quality_ratio_to_baseline"] = (result["pipeline_mean_quality"]
                                            / result["baseline_mean_quality"])
-    table = _imagery_table(per_image, list(methods))
+    table = _imagery_table(per_image, list(IMAGERY_PATHS), default_path)
     (out / "imagery_real.md").write_text(table)
     return {**result, "per_image": per_image, "table": table}
 
