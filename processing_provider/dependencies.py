@@ -15,7 +15,8 @@ import sys
 
 #: (module, distribution, minimum version): pyproject.toml's dependencies that the
 #: algorithms import (not needed inside QGIS: scikit-learn trains the learned cue, dask runs
-#: LiDAR tiles on a cluster, imported only then, tqdm draws the command line's progress bar).
+#: LiDAR tiles on a cluster, imported only then, tqdm draws the command line's progress bar,
+#: threadpoolctl pins BLAS threads where it is installed and is skipped where not).
 REQUIREMENTS = [
     ("numpy", "numpy", "1.24"),
     ("scipy", "scipy", "1.10"),
