@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
-from .progress import to_json
+from .progress import Cancelled, to_json
 
 EPILOG = "Distances are in metres. Outputs are written in the input's CRS."
 
@@ -39,7 +39,14 @@ class _ProgressBar:
         self.message = None
         self.bar = None
 
+    terminated = False
+    """Set by SIGTERM (:func:`_cancel_on_sigterm`): every later report raises
+    :class:`~gisroads.progress.Cancelled` again, so a cancel that arrives while a library
+    swallows the exception (a Dask cluster starting its workers) still stops the job."""
+
     def __call__(self, fraction: float, message: str = "") -> None:
+        if _ProgressBar.terminated:
+            raise Cancelled()
         percent = max(0, min(100, int(fraction * 100)))
         if self.json_lines:
             if percent != self.last or message != self.message:
@@ -655,6 +662,7 @@ def _cancel_on_sigterm(cancelled: type[Exception]):
         return None
 
     def cancel(signum, frame):
+        _ProgressBar.terminated = True
         raise cancelled()
     return signal.signal(signal.SIGTERM, cancel)
 
@@ -668,6 +676,7 @@ def main(argv=None) -> int:
     from .progress import Cancelled
     notes = []
     _ProgressBar.json_lines = getattr(args, "progress_json", False)
+    _ProgressBar.terminated = False
     previous = None
     try:
         check_outputs(args)

@@ -54,6 +54,8 @@ def run_external(executable: str, arguments: list[str], feedback) -> dict:
     try:
         for line in process.stderr:
             if line.startswith("{"):
+                if feedback.isCanceled():
+                    continue  # lines the command wrote before it was stopped
                 event = json.loads(line)
                 feedback.setProgress(100.0 * event["progress"])
                 if event["message"]:
