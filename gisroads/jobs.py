@@ -705,17 +705,25 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     if quicklook is not None:
         report(progress, 0.97, "drawing the quick-look")
         parts = network.qa.get("road_parts", network.qa.get("rejected"))
-        write_quicklook(quicklook, [
-            (parts, dict(color="orange", linewidth=1, label="road parts")),
-            (network.qa["gap_edges"].query("selected"),
-             dict(color="cyan", linewidth=1.5, label="selected gaps")),
-            (network.centrelines, dict(color="red", linewidth=1.5, label="road centre lines")),
-            (network.junctions, dict(color="yellow", markersize=20, label="junctions")),
-        ], background=image, title=f"{Path(image_path).name}: {result['roads']} roads "
-                                   f"({result['cues']})")
-        result["quicklook"] = Path(quicklook)
+        result["quicklook"] = _network_quicklook(
+            quicklook, network, (parts, dict(color="orange", linewidth=1, label="road parts")),
+            background=image,
+            title=f"{Path(image_path).name}: {result['roads']} roads ({result['cues']})")
     report(progress, 1.0, "done")
     return result
+
+
+def _network_quicklook(path, network, first: tuple, *, background, title: str) -> Path:
+    """A PNG of a network over its raster: ``first`` (a QA layer and its style), the gaps
+    the integer program bridged, the centre lines and the junctions."""
+    write_quicklook(path, [
+        first,
+        (network.qa["gap_edges"].query("selected"),
+         dict(color="cyan", linewidth=2, label="bridged gaps")),
+        (network.centrelines, dict(color="red", linewidth=1.5, label="road centre lines")),
+        (network.junctions, dict(color="yellow", markersize=20, label="junctions")),
+    ], background=background, title=title)
+    return Path(path)
 
 
 def _map_lines(map_source) -> gpd.GeoDataFrame:
@@ -848,15 +856,12 @@ def vectorize_job(raster_path, out_path, *, band: int = 1, threshold: float = 0.
               "gaps_bridged": int(network.qa["gap_edges"]["selected"].sum())}
     if quicklook is not None:
         report(progress, 0.97, "drawing the quick-look")
-        write_quicklook(quicklook, [
+        result["quicklook"] = _network_quicklook(
+            quicklook, network,
             (network.qa["rejected"], dict(color="grey", linewidth=1, label="rejected")),
-            (network.qa["gap_edges"].query("selected"),
-             dict(color="cyan", linewidth=2, label="bridged gaps")),
-            (network.centrelines, dict(color="red", linewidth=1.5, label="road centre lines")),
-            (network.junctions, dict(color="yellow", markersize=20, label="junctions")),
-        ], background=raster, title=f"{Path(raster_path).name}: {len(network.centrelines)} "
-                                     f"roads, {len(network.junctions)} junctions")
-        result["quicklook"] = Path(quicklook)
+            background=raster, title=f"{Path(raster_path).name}: "
+                                     f"{len(network.centrelines)} roads, "
+                                     f"{len(network.junctions)} junctions")
     report(progress, 1.0, "done")
     return result
 

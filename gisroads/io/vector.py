@@ -182,17 +182,21 @@ def read_layer(path, layer: str | None = None, *, crs=None) -> gpd.GeoDataFrame:
     return frame
 
 
-def list_layers(path) -> list[str]:
-    """Names of the layers in a GeoPackage, in file order."""
+def _query(path, sql: str) -> list[tuple]:
+    """Rows of a read-only query of a GeoPackage's tables."""
     con = sqlite3.connect(f"file:{Path(path)}?mode=ro", uri=True)
     try:
-        rows = con.execute("SELECT table_name FROM gpkg_contents"
-                           " WHERE data_type = 'features' ORDER BY rowid").fetchall()
+        return con.execute(sql).fetchall()
     except sqlite3.DatabaseError as err:
         raise ValueError(f"{path}: not a GeoPackage ({err})") from None
     finally:
         con.close()
-    return [r[0] for r in rows]
+
+
+def list_layers(path) -> list[str]:
+    """Names of the layers in a GeoPackage, in file order."""
+    return [r[0] for r in _query(path, "SELECT table_name FROM gpkg_contents"
+                                       " WHERE data_type = 'features' ORDER BY rowid")]
 
 
 #: GeoPackage geometry type names (``gpkg_geometry_columns``) as the OGC/shapely ones.
@@ -204,12 +208,5 @@ _GPKG_GEOMETRY = {name.upper(): name for name in (
 def layer_geometry_types(path) -> dict[str, str]:
     """The geometry type each layer of a GeoPackage declares (``LineString`` ...; ``Geometry``
     for any), whether or not it holds features: what QGIS reads an empty layer as."""
-    con = sqlite3.connect(f"file:{Path(path)}?mode=ro", uri=True)
-    try:
-        rows = con.execute("SELECT table_name, geometry_type_name"
-                           " FROM gpkg_geometry_columns").fetchall()
-    except sqlite3.DatabaseError as err:
-        raise ValueError(f"{path}: not a GeoPackage ({err})") from None
-    finally:
-        con.close()
+    rows = _query(path, "SELECT table_name, geometry_type_name FROM gpkg_geometry_columns")
     return {table: _GPKG_GEOMETRY.get(kind.upper(), kind) for table, kind in rows}

@@ -1,45 +1,21 @@
 """Tiles as tasks on Dask (issue 12, item 2): the same network whatever the number of
 workers, on a local cluster or on a real scheduler and worker started here on loopback."""
 import json
-import os
 import socket
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
-import shapely
 
 from gisroads.io.vector import read_layer
 from gisroads.lidar.pipeline import extract_roads
 from gisroads.parallel import progress_message, run_tasks
-from gisroads.synthetic import make_scene, write_cloud
+from tests.lidar.tile_runs import ENV, GISROADS, assert_same_geometries
+
 
 pytest.importorskip("distributed")
-
-GISROADS = [sys.executable, "-m", "gisroads.cli"]
-ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(Path(__file__).parents[2])}
-
-
-@pytest.fixture(scope="module")
-def cloud(tmp_path_factory):
-    scene = make_scene(seed=1, size_m=(700.0, 500.0))
-    path = tmp_path_factory.mktemp("parallel") / "cloud.laz"
-    write_cloud(scene, path, density_per_m2=2.0, seed=1)
-    return path
-
-
-@pytest.fixture(scope="module")
-def in_process(cloud):
-    """The intensity cue's network, tiles run here one after another."""
-    return extract_roads(cloud)
-
-
-def _same_geometries(a, b):
-    assert len(a) == len(b)
-    assert np.array_equal(shapely.to_wkb(a.geometry.values), shapely.to_wkb(b.geometry.values))
 
 
 def _square(x):
@@ -56,23 +32,24 @@ def test_results_come_back_in_the_items_order_here_and_on_dask():
     assert progress_message(1, 4, time.monotonic() - 10).endswith("about 0:30 left")
 
 
-def test_two_workers_give_the_network_of_one(cloud, in_process):
-    parallel = extract_roads(cloud, workers=2)
+def test_two_workers_give_the_network_of_one(tiled_cloud, tiled_network):
+    parallel = extract_roads(tiled_cloud, workers=2)
     assert parallel.run == {"tiles": 6, "reused": 0}
     for name in ("centrelines", "polygons", "junctions"):
-        _same_geometries(getattr(parallel.network, name), getattr(in_process.network, name))
-    assert len(in_process.network.centrelines) > 10
+        assert_same_geometries(getattr(parallel.network, name),
+                               getattr(tiled_network.network, name))
+    assert len(tiled_network.network.centrelines) > 10
     np.testing.assert_array_equal(parallel.network.centrelines.width_m,
-                                  in_process.network.centrelines.width_m)
+                                  tiled_network.network.centrelines.width_m)
     # the per-width likelihood maps come back only when asked for (a city's memory)
     assert sum(len(t.likelihood) for t in parallel.tiles) >= len(parallel.tiles)
-    lean = extract_roads(cloud, workers=2, tile_maps=False)
+    lean = extract_roads(tiled_cloud, workers=2, tile_maps=False)
     assert [len(t.likelihood) for t in lean.tiles] == [0] * 6
-    _same_geometries(lean.network.centrelines, in_process.network.centrelines)
+    assert_same_geometries(lean.network.centrelines, tiled_network.network.centrelines)
     # the evidence cue too (its reference tile first, the others on the cluster)
-    one = extract_roads(cloud, cue="evidence")
-    two = extract_roads(cloud, cue="evidence", workers=2)
-    _same_geometries(one.network.centrelines, two.network.centrelines)
+    one = extract_roads(tiled_cloud, cue="evidence")
+    two = extract_roads(tiled_cloud, cue="evidence", workers=2)
+    assert_same_geometries(one.network.centrelines, two.network.centrelines)
     np.testing.assert_array_equal(one.evidence.data, two.evidence.data)
 
 
@@ -92,7 +69,7 @@ def _stop(process):
             process.wait()
 
 
-def test_cli_on_a_real_scheduler_and_worker_on_loopback(cloud, in_process, tmp_path):
+def test_cli_on_a_real_scheduler_and_worker_on_loopback(tiled_cloud, tiled_network, tmp_path):
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
     scheduler = subprocess.Popen(
@@ -109,14 +86,14 @@ def test_cli_on_a_real_scheduler_and_worker_on_loopback(cloud, in_process, tmp_p
         with Client(address, timeout=60) as client:  # wait for the worker to join
             client.wait_for_workers(1, timeout=120)
         out = tmp_path / "roads.gpkg"
-        done = subprocess.run([*GISROADS, "lidar", str(cloud), "-o", str(out), "--json",
+        done = subprocess.run([*GISROADS, "lidar", str(tiled_cloud), "-o", str(out), "--json",
                                "--scheduler", address, "--work-dir", str(tmp_path / "work")],
                               capture_output=True, text=True, env=ENV, timeout=600)
         assert done.returncode == 0, done.stderr[-3000:]
         result = json.loads(done.stdout)
         assert result["tiles_run"] == 6 and result["tiles_reused"] == 0
-        _same_geometries(read_layer(out, "road_centrelines"),
-                         in_process.network.centrelines.reset_index(drop=True))
+        assert_same_geometries(read_layer(out, "road_centrelines"),
+                         tiled_network.network.centrelines.reset_index(drop=True))
     finally:
         for process in (worker, scheduler):
             if process is not None:

@@ -5,44 +5,16 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
-from pathlib import Path
-
-import numpy as np
-import pytest
-import shapely
 
 from gisroads.io.vector import read_layer
-from gisroads.lidar.pipeline import extract_roads
-from gisroads.synthetic import make_scene, write_cloud
-
-GISROADS = [sys.executable, "-m", "gisroads.cli"]
-ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(Path(__file__).parents[2])}
+from tests.lidar.tile_runs import ENV, GISROADS, assert_same_geometries
 
 
-@pytest.fixture(scope="module")
-def cloud(tmp_path_factory):
-    scene = make_scene(seed=1, size_m=(700.0, 500.0))
-    path = tmp_path_factory.mktemp("resume") / "cloud.laz"
-    write_cloud(scene, path, density_per_m2=2.0, seed=1)
-    return path
-
-
-@pytest.fixture(scope="module")
-def in_process(cloud):
-    """The intensity cue's network of an uninterrupted run."""
-    return extract_roads(cloud)
-
-
-def _same_geometries(a, b):
-    assert len(a) == len(b)
-    assert np.array_equal(shapely.to_wkb(a.geometry.values), shapely.to_wkb(b.geometry.values))
-
-
-def test_a_killed_run_resumes_without_redoing_finished_tiles(cloud, in_process, tmp_path):
+def test_a_killed_run_resumes_without_redoing_finished_tiles(tiled_cloud, tiled_network,
+                                                             tmp_path):
     work, out = tmp_path / "work", tmp_path / "roads.gpkg"
-    command = [*GISROADS, "lidar", str(cloud), "-o", str(out), "--json", "--workers", "1",
+    command = [*GISROADS, "lidar", str(tiled_cloud), "-o", str(out), "--json", "--workers", "1",
                "--work-dir", str(work)]
     run = subprocess.Popen(command, env=ENV, stdout=subprocess.DEVNULL,
                            stderr=subprocess.DEVNULL, start_new_session=True)
@@ -68,8 +40,8 @@ def test_a_killed_run_resumes_without_redoing_finished_tiles(cloud, in_process, 
     assert done.returncode == 0, done.stderr[-3000:]
     result = json.loads(done.stdout)
     assert result["tiles_run"] == 6 and result["tiles_reused"] == kept
-    _same_geometries(read_layer(out, "road_centrelines"),
-                     in_process.network.centrelines.reset_index(drop=True))
+    assert_same_geometries(read_layer(out, "road_centrelines"),
+                     tiled_network.network.centrelines.reset_index(drop=True))
     # a third run takes every tile from the work folder; without --json the progress on
     # stderr counts the tiles done and estimates the time left
     again = subprocess.run([c for c in command if c != "--json"], capture_output=True,
