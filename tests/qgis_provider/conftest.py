@@ -59,16 +59,21 @@ class QgisProcess:
         return json.loads(self(*args).stdout)["results"]
 
 
-@pytest.fixture(scope="session")
-def qgis_process(plugin_zip, tmp_path_factory) -> QgisProcess:
-    if not Path(QGIS_PROCESS).exists():
-        pytest.fail(f"{QGIS_PROCESS} missing: run scripts/setup.sh")
-    home = tmp_path_factory.mktemp("qgis_home")
+def plugin_profile(plugin_zip: Path, home: Path) -> QgisProcess:
+    """qgis_process with the plugin zip unpacked into the profile of a throwaway ``home``
+    (not yet enabled: the caller may still change the runner's environment)."""
     plugins = home / ".local/share/QGIS/QGIS3/profiles/default/python/plugins"
     plugins.mkdir(parents=True)
     with zipfile.ZipFile(plugin_zip) as archive:
         archive.extractall(plugins)
-    runner = QgisProcess(home)
+    return QgisProcess(home)
+
+
+@pytest.fixture(scope="session")
+def qgis_process(plugin_zip, tmp_path_factory) -> QgisProcess:
+    if not Path(QGIS_PROCESS).exists():
+        pytest.fail(f"{QGIS_PROCESS} missing: run scripts/setup.sh")
+    runner = plugin_profile(plugin_zip, tmp_path_factory.mktemp("qgis_home"))
     runner("plugins", "enable", "gisroads_qgis")
     return runner
 

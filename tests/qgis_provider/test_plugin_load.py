@@ -9,7 +9,6 @@ import shutil
 import subprocess
 import sys
 import tomllib
-import zipfile
 from pathlib import Path
 
 import pytest
@@ -17,7 +16,7 @@ import pytest
 from processing_provider.dependencies import (REQUIREMENTS, load_error_message,
                                               missing_message, missing_requirements)
 
-from tests.qgis_provider.conftest import QgisProcess
+from tests.qgis_provider.conftest import QgisProcess, plugin_profile
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -25,12 +24,7 @@ REPO = Path(__file__).resolve().parents[2]
 @pytest.fixture(scope="module")
 def plain_qgis_process(plugin_zip, tmp_path_factory) -> QgisProcess:
     """qgis_process as QGIS starts normally: the system Python alone, no .venv-qgis."""
-    home = tmp_path_factory.mktemp("plain_qgis_home")
-    plugins = home / ".local/share/QGIS/QGIS3/profiles/default/python/plugins"
-    plugins.mkdir(parents=True)
-    with zipfile.ZipFile(plugin_zip) as archive:
-        archive.extractall(plugins)
-    runner = QgisProcess(home)
+    runner = plugin_profile(plugin_zip, tmp_path_factory.mktemp("plain_qgis_home"))
     del runner.env["PYTHONPATH"]
     # and no gisroads command to run as an external tool
     runner.env["PATH"] = os.pathsep.join(
@@ -179,12 +173,7 @@ def external_gisroads() -> str:
 @pytest.fixture(scope="module")
 def external_qgis_process(plugin_zip, tmp_path_factory) -> QgisProcess:
     """qgis_process with the system Python alone and an external gisroads named."""
-    home = tmp_path_factory.mktemp("external_qgis_home")
-    plugins = home / ".local/share/QGIS/QGIS3/profiles/default/python/plugins"
-    plugins.mkdir(parents=True)
-    with zipfile.ZipFile(plugin_zip) as archive:
-        archive.extractall(plugins)
-    runner = QgisProcess(home)
+    runner = plugin_profile(plugin_zip, tmp_path_factory.mktemp("external_qgis_home"))
     del runner.env["PYTHONPATH"]
     runner.env["GISROADS_EXECUTABLE"] = external_gisroads()
     runner.env["OPENBLAS_NUM_THREADS"] = "1"
