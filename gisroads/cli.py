@@ -40,9 +40,8 @@ class _ProgressBar:
         self.bar = None
 
     terminated = False
-    """Set by SIGTERM (:func:`_cancel_on_sigterm`): every later report raises
-    :class:`~gisroads.progress.Cancelled` again, so a cancel that arrives while a library
-    swallows the exception (a Dask cluster starting its workers) still stops the job."""
+    """Set by SIGTERM (:func:`_cancel_on_sigterm`): the next report raises
+    :class:`~gisroads.progress.Cancelled`, and every later one again."""
 
     def __call__(self, fraction: float, message: str = "") -> None:
         if _ProgressBar.terminated:
@@ -652,18 +651,19 @@ def _error_text(err: Exception, args) -> str:
     return str(err)
 
 
-def _cancel_on_sigterm(cancelled: type[Exception]):
+def _cancel_on_sigterm():
     """SIGTERM (``kill``, a program stopping its gisroads run) cancels like Ctrl-C: the
     outputs being written are removed (they are written to temporary files) and the exit
-    status is 130. Returns the previous handler (None outside the main thread, where Python
-    delivers no signal)."""
+    status is 130. The job stops at its next progress report, where the cancel raises
+    (raised in the handler itself it can land inside a C callback, which prints it and
+    drops it: threadpoolctl's, or Dask's start-up). Returns the previous handler (None
+    outside the main thread, where Python delivers no signal)."""
     import threading
     if threading.current_thread() is not threading.main_thread():
         return None
 
     def cancel(signum, frame):
         _ProgressBar.terminated = True
-        raise cancelled()
     return signal.signal(signal.SIGTERM, cancel)
 
 
@@ -673,14 +673,13 @@ def main(argv=None) -> int:
     from .errors import reported_warnings
     from .io.las import LasError
     from .io.raster import RasterError
-    from .progress import Cancelled
     notes = []
     _ProgressBar.json_lines = getattr(args, "progress_json", False)
     _ProgressBar.terminated = False
     previous = None
     try:
         check_outputs(args)
-        previous = _cancel_on_sigterm(Cancelled)
+        previous = _cancel_on_sigterm()
         with reported_warnings(notes.append):
             status = args.func(args)
         for note in notes:  # after the progress bar and the result
