@@ -690,11 +690,7 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     roads = extract_image_roads(image, nir_band=nir_band, red_band=red_band, dsm=dsm,
                                 model=model, progress=scaled(progress, 0.0, 0.95), **options)
     network = roads.network
-    layers = network.layers()
-    if source_crs is not None and source_crs != image.crs:
-        layers = {name: frame.to_crs(source_crs) for name, frame in layers.items()}
-    write_geopackage(out_path, layers)
-    _warn_if_no_road(network, image_path)
+    _write_network(out_path, network, image.crs, source_crs, image_path)
     result = {"gpkg": Path(out_path), "roads": len(network.centrelines),
               "length_m": float(network.centrelines.length_m.sum()),
               "junctions": len(network.junctions), "cues": roads.report["cues"]["cues"],
@@ -711,6 +707,17 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
             title=f"{Path(image_path).name}: {result['roads']} roads ({result['cues']})")
     report(progress, 1.0, "done")
     return result
+
+
+def _write_network(out_path, network, working_crs, source_crs, source) -> None:
+    """Every layer of a network into a GeoPackage, back in the input's own CRS when the
+    job worked in another (a geographic raster in its UTM zone); a warning when it is
+    empty."""
+    layers = network.layers()
+    if source_crs is not None and source_crs != working_crs:
+        layers = {name: frame.to_crs(source_crs) for name, frame in layers.items()}
+    write_geopackage(out_path, layers)
+    _warn_if_no_road(network, source)
 
 
 def _network_quicklook(path, network, first: tuple, *, background, title: str) -> Path:
@@ -845,11 +852,7 @@ def vectorize_job(raster_path, out_path, *, band: int = 1, threshold: float = 0.
     raster, source_crs = read_image(raster_path, pixel_m=pixel_m, crs=crs)
     network = raster_to_network(raster, band=band, threshold=threshold,
                                 progress=scaled(progress, 0.0, 0.95))
-    layers = network.layers()
-    if source_crs is not None and source_crs != raster.crs:
-        layers = {name: frame.to_crs(source_crs) for name, frame in layers.items()}
-    write_geopackage(out_path, layers)
-    _warn_if_no_road(network, raster_path)
+    _write_network(out_path, network, raster.crs, source_crs, raster_path)
     result = {"gpkg": Path(out_path), "roads": len(network.centrelines),
               "length_m": float(network.centrelines.length_m.sum()),
               "junctions": len(network.junctions),

@@ -14,11 +14,8 @@ from gisroads.synthetic import make_scene, write_cloud
 
 
 @pytest.fixture(scope="module")
-def cloud(tmp_path_factory):
-    scene = make_scene(seed=1, size_m=(700.0, 500.0))
-    path = tmp_path_factory.mktemp("store") / "cloud.laz"
-    write_cloud(scene, path, density_per_m2=2.0, seed=1)
-    return path
+def cloud(tiled_cloud):
+    return tiled_cloud
 
 
 @pytest.fixture(scope="module")
