@@ -1,0 +1,28 @@
+"""Whole jobs, composed from the stages: what the CLI subcommands and the QGIS algorithms run.
+
+Each job reads files, calls pure stages, and writes its outputs through temporary files.
+One module per method (:mod:`.lidar`, :mod:`.imagery`, :mod:`.snakes`, :mod:`.network`,
+:mod:`.update`), the evaluation and demo jobs, and what they share (:mod:`.common`: the
+inputs they read, :func:`network_summary`, the no-road warning). Every job is importable
+from here.
+"""
+from .common import (VECTOR_SUFFIXES, describe_file, network_summary, parse_metres,
+                     read_image, stage_default)
+from .demo import DEMO_CLOUD, DEMO_IMAGE, DEMO_IMAGE_TRUTH, demo_job
+from .evaluate import evaluate_job, synth_job
+from .imagery import image_job, train_job
+from .lidar import (blocks_job, evidence_job, ground_intensity_job, lidar_job,
+                    lidar_segmentation_job, likelihood_job, min_cover_job,
+                    rectangles_network_job, tag_job)
+from .network import vectorize_job
+from .snakes import attractor_job, register_job, snakes_job
+from .update import update_job
+
+__all__ = [
+    "VECTOR_SUFFIXES", "describe_file", "network_summary", "parse_metres", "read_image",
+    "stage_default", "DEMO_CLOUD", "DEMO_IMAGE", "DEMO_IMAGE_TRUTH", "demo_job",
+    "evaluate_job", "synth_job", "image_job", "train_job", "blocks_job", "evidence_job",
+    "ground_intensity_job", "lidar_job", "lidar_segmentation_job", "likelihood_job",
+    "min_cover_job", "rectangles_network_job", "tag_job", "vectorize_job", "attractor_job",
+    "register_job", "snakes_job", "update_job",
+]

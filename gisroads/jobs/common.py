@@ -1,0 +1,165 @@
+"""What the jobs of every method share: reading their inputs (a road map, an aerial image,
+a layer), the summary of a written road network, its quick-look, the no-road warning, and
+the header facts of ``gisroads info``."""
+from __future__ import annotations
+
+import inspect
+import warnings
+from pathlib import Path
+
+import geopandas as gpd
+import numpy as np
+
+from ..errors import NoRoadFoundWarning
+from ..geo import CENTRELINES, GeoRaster, RoadNetwork
+from ..imagery.datasets import warp_to_utm
+from ..io.las import las_info
+from ..io.quicklook import write_quicklook
+from ..io.raster import raster_info, read_raster
+from ..io.vector import layer_geometry_types, list_layers, read_layer, write_geopackage
+
+VECTOR_SUFFIXES = {".gpkg", ".geojson", ".json", ".shp", ".fgb", ".kml", ".gml"}
+
+
+def stage_default(function, parameter: str):
+    """The default of ``parameter`` in the signature of the stage ``function``: the one
+    place a default is written, read by the jobs, the command line and the QGIS
+    algorithms."""
+    return inspect.signature(function).parameters[parameter].default
+
+
+def parse_metres(text: str, name: str = "value") -> tuple[float, ...]:
+    """Positive metres from a comma- (or semicolon-) separated list, e.g. ``"6,9,12"``."""
+    try:
+        values = tuple(float(v) for v in text.replace(";", ",").split(",") if v.strip())
+    except ValueError:
+        raise ValueError(f"{name}: {text!r} is not a comma-separated list of metres") from None
+    if not values or min(values) <= 0:
+        raise ValueError(f"{name}: give positive metres, e.g. 6,9,12")
+    return values
+
+
+def _plain(value):
+    """``value`` with numpy scalars and arrays as Python numbers and lists (JSON and text
+    show ``636001.76``, not ``np.float64(636001.76)``)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in value]
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def describe_file(path) -> dict:
+    """Header facts of a LAS/LAZ, raster or vector file (see ``gisroads info``).
+
+    Plain Python values throughout. A GeoPackage layer's ``geometry`` is the types of its
+    features, or for an empty layer the type the file declares for it; a raster without
+    georeferencing has ``georeferenced`` False and no ``extent`` or ``pixel_size``.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix in {".las", ".laz"}:
+        return _plain({"kind": "point cloud", **las_info(path)})
+    if suffix in VECTOR_SUFFIXES:
+        names = list_layers(path) if suffix == ".gpkg" else [None]
+        declared = layer_geometry_types(path) if suffix == ".gpkg" else {}
+        layers = []
+        for name in names:
+            frame = read_layer(path, name)
+            found = sorted(set(frame.geom_type.dropna()))
+            layers.append({"layer": name or path.stem, "features": len(frame),
+                           "geometry": found or ([declared[name]] if name in declared
+                                                 else []),
+                           "crs": frame.crs.name if frame.crs else None,
+                           "epsg": frame.crs.to_epsg() if frame.crs else None,
+                           "extent": [float(v) for v in frame.total_bounds] if len(frame)
+                           else None})
+        return _plain({"kind": "vector", "path": str(path), "layers": layers})
+    return _plain({"kind": "raster", **raster_info(path)})
+
+
+def _warn_if_empty(frame: gpd.GeoDataFrame, source, found: str = "road", *,
+                   stacklevel: int = 3) -> None:
+    """Warn that a job found no ``found`` in ``source`` (a file, or a layer given as a
+    GeoDataFrame) when ``frame`` is empty, and wrote empty layers: a valid answer, for a
+    forest plot or a field."""
+    if len(frame) == 0:
+        where = "the input layer" if isinstance(source, gpd.GeoDataFrame) else source
+        warnings.warn(f"no {found} found in {where}; wrote empty layers",
+                      NoRoadFoundWarning, stacklevel=stacklevel)
+
+
+def _warn_if_no_road(network: RoadNetwork, source) -> None:
+    """Warn that a job found no road in ``source`` and wrote empty layers."""
+    _warn_if_empty(network.centrelines, source, stacklevel=4)
+
+
+def network_summary(out_path, network: RoadNetwork) -> dict:
+    """What every road job reports of the network it wrote to ``out_path``: the
+    GeoPackage, its roads, their length in metres and its junctions."""
+    return {"gpkg": Path(out_path), "roads": len(network.centrelines),
+            "length_m": float(network.centrelines.length_m.sum()),
+            "junctions": len(network.junctions)}
+
+
+def _write_network(out_path, network, working_crs, source_crs, source) -> None:
+    """Every layer of a network into a GeoPackage, back in the input's own CRS when the
+    job worked in another (a geographic raster in its UTM zone); a warning when it is
+    empty."""
+    layers = network.layers()
+    if source_crs is not None and source_crs != working_crs:
+        layers = {name: frame.to_crs(source_crs) for name, frame in layers.items()}
+    write_geopackage(out_path, layers)
+    _warn_if_no_road(network, source)
+
+
+def _network_quicklook(path, network, first: tuple, *, background, title: str) -> Path:
+    """A PNG of a network over its raster: ``first`` (a QA layer and its style), the gaps
+    the integer program bridged, the centre lines and the junctions."""
+    write_quicklook(path, [
+        first,
+        (network.qa["gap_edges"].query("selected"),
+         dict(color="cyan", linewidth=2, label="bridged gaps")),
+        (network.centrelines, dict(color="red", linewidth=1.5, label="road centre lines")),
+        (network.junctions, dict(color="yellow", markersize=20, label="junctions")),
+    ], background=background, title=title)
+    return Path(path)
+
+
+def _layer(source, layer: str) -> gpd.GeoDataFrame:
+    """A GeoDataFrame as given, or layer ``layer`` of a file (its only layer otherwise)."""
+    if isinstance(source, gpd.GeoDataFrame):
+        return source
+    return read_layer(source, layer if layer in list_layers(source) else None)
+
+
+def _map_lines(map_source) -> gpd.GeoDataFrame:
+    """Road map lines from a GeoDataFrame or a line file (a GeoPackage's road_centrelines
+    layer when it has one, else its first layer)."""
+    if isinstance(map_source, gpd.GeoDataFrame):
+        return map_source
+    if not Path(map_source).is_file():
+        raise ValueError(f"{map_source}: no such road map file")
+    gpkg = str(map_source).lower().endswith(".gpkg")
+    return read_layer(map_source, CENTRELINES if gpkg and CENTRELINES in
+                      list_layers(map_source) else None)
+
+
+def read_image(path, *, pixel_m: float | None = None, crs=None) -> tuple[GeoRaster, object]:
+    """An aerial image in a metre CRS, and the CRS its results go back to.
+
+    A projected GeoTIFF is read as it is; a geographic one (EPSG:4326, as SpaceNet ships) is
+    warped to its UTM zone at its own ground resolution; an image without georeferencing
+    (PNG, JPEG) needs ``pixel_m`` and a projected ``crs``.
+    """
+    raster = read_raster(path, pixel_size=pixel_m, crs=crs)
+    if raster.crs is None or not raster.crs.is_geographic:
+        return raster, raster.crs
+    rows, cols = raster.shape
+    (west, south, east, north) = raster.bounds
+    lat = np.radians((south + north) / 2.0)
+    metres_per_pixel = np.sqrt((east - west) / cols * 111_320.0 * np.cos(lat)
+                               * (north - south) / rows * 110_540.0)
+    warped, _ = warp_to_utm(path, round(float(metres_per_pixel), 2),
+                            nodata=raster.nodata if raster.nodata is not None else 0)
+    return warped, raster.crs

@@ -1,0 +1,119 @@
+"""The imagery jobs: road extraction from an aerial image (Grote & Rottensteiner's stages
+with a learned road cue) and training that cue on an image from a road layer."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import geopandas as gpd
+
+from ..imagery.pipeline import PROBABILITY_THRESHOLD, extract_image_roads, resolve_model
+from ..io.raster import read_raster, write_geotiff
+from ..learn.model import save_model, with_metadata
+from ..learn.training import train_from_layer
+from ..progress import Progress, report, scaled
+from .common import (_map_lines, _network_quicklook, _write_network, network_summary,
+                     read_image, stage_default)
+
+
+def image_job(image_path, out_path, *, nir_band: int | None = None,
+              red_band: int | None = None, dsm_path=None, pixel_m: float | None = None,
+              crs=None, quicklook=None, model="default", probability_path=None,
+              method: str | None = None, n_segments: int | None = None,
+              probability_threshold: float = PROBABILITY_THRESHOLD,
+              adapt: bool = stage_default(extract_image_roads, "adapt"),
+              threads: int | None = stage_default(extract_image_roads, "threads"),
+              road_part_criteria: dict | None = None, gap_options: dict | None = None,
+              weight_options: dict | None = None, network_options: dict | None = None,
+              progress: Progress = None) -> dict:
+    """Road extraction of an aerial image into a GeoPackage: Grote & Rottensteiner's stages
+    with a learned road cue (see :func:`gisroads.imagery.pipeline.extract_image_roads`).
+
+    Writes ``out_path`` with road_centrelines (width_m, and ``cues``: which of rgb/cir/pan,
+    nir, dsm and model were used), road_polygons, junctions and the QA layers (segments,
+    road_parts, gap_edges and junction_connections for the papers' stages), in the image's
+    CRS; optionally a ``quicklook`` PNG and ``probability_path``, the learned road
+    probability as a float32 GeoTIFF (band ``road_probability``, 0-1, NaN no data) on the
+    grid the image was worked on (its UTM zone for a geographic image). ``model``:
+    ``"default"``, a model file of :func:`train_job`, or ``"none"`` (the papers' pipeline
+    alone). The parameters from ``method`` on are those of
+    :func:`gisroads.imagery.pipeline.extract_image_roads`. An image without roads gives
+    empty layers and a :class:`~gisroads.errors.NoRoadFoundWarning`.
+    """
+    image, source_crs = read_image(image_path, pixel_m=pixel_m, crs=crs)
+    band_count = image.data.shape[0] if image.data.ndim == 3 else 1
+    for name, band in (("NIR", nir_band), ("red", red_band)):
+        if band is not None and not 1 <= band <= band_count:
+            raise ValueError(f"{image_path}: no {name} band {band} (the image has "
+                             f"{band_count} band(s))")
+    model = resolve_model(model)
+    if probability_path is not None and model is None:
+        raise ValueError("a road probability raster needs a model (not --model none)")
+    dsm = read_raster(dsm_path) if dsm_path is not None else None
+    roads = extract_image_roads(
+        image, nir_band=nir_band, red_band=red_band, dsm=dsm, model=model, method=method,
+        n_segments=n_segments, probability_threshold=probability_threshold, adapt=adapt,
+        threads=threads, road_part_criteria=road_part_criteria, gap_options=gap_options,
+        weight_options=weight_options, network_options=network_options,
+        progress=scaled(progress, 0.0, 0.95))
+    network = roads.network
+    _write_network(out_path, network, image.crs, source_crs, image_path)
+    result = {**network_summary(out_path, network), "cues": roads.report["cues"]["cues"],
+              "method": roads.report["method"], "timings_s": roads.report["timings_s"]}
+    if probability_path is not None:
+        result["probability"] = write_geotiff(probability_path, roads.report["probability"],
+                                              band_names=["road_probability"])
+    if quicklook is not None:
+        report(progress, 0.97, "drawing the quick-look")
+        parts = network.qa.get("road_parts", network.qa.get("rejected"))
+        result["quicklook"] = _network_quicklook(
+            quicklook, network, (parts, dict(color="orange", linewidth=1, label="road parts")),
+            background=image,
+            title=f"{Path(image_path).name}: {result['roads']} roads ({result['cues']})")
+    report(progress, 1.0, "done")
+    return result
+
+
+def train_job(image_path, roads_path, out_path, *, width_field: str | None = None,
+              width_m: float = stage_default(train_from_layer, "default_width_m"),
+              guard_m: float = stage_default(train_from_layer, "guard_m"),
+              pixel_m: float | None = None, crs=None,
+              samples: int = stage_default(train_from_layer, "samples"),
+              seed: int = stage_default(train_from_layer, "seed"),
+              progress: Progress = None) -> dict:
+    """Train a road model on an image from a road layer over it (the agency's update case).
+
+    Roads (any OGR line layer or a GeoDataFrame, any CRS; a gisroads GeoPackage's
+    road_centrelines) are
+    rasterised at their width (``width_field``, metres; empty or missing values and layers
+    without the field take ``width_m``): positives in the core half of each road, negatives
+    beyond ``width / 2 + guard_m`` (misregistered lines), calibrated to the image's road
+    share (:func:`gisroads.learn.train_from_layer`). Writes the model archive ``out_path``
+    (.npz), to give to ``image_job(..., model=out_path)``. Needs scikit-learn.
+    """
+    image, _ = read_image(image_path, pixel_m=pixel_m, crs=crs)
+    roads = _map_lines(roads_path)
+    if roads.crs is None and image.crs is not None:
+        raise ValueError(f"{roads_path}: the road layer has no CRS; cannot place it on the "
+                         "image")
+    if width_field is not None and width_field not in roads.columns:
+        raise ValueError(f"{roads_path}: no field {width_field!r} (fields: "
+                         f"{', '.join(c for c in roads.columns if c != 'geometry')})")
+    if width_m <= 0 or guard_m < 0:
+        raise ValueError("the width must be positive and the guard band at least 0 m")
+    try:
+        import sklearn  # noqa: F401  (optional: checked here to say what is missing)
+    except ImportError:
+        raise ValueError("training needs scikit-learn (pip install scikit-learn, or the "
+                         "python3-sklearn package)") from None
+    report(progress, 0.0, "sampling the image along the roads")
+    model = train_from_layer(image, roads, width_field=width_field, default_width_m=width_m,
+                             guard_m=guard_m, samples=samples, seed=seed, road_share="layer",
+                             progress=scaled(progress, 0.05, 0.95))
+    model = with_metadata(model, image=Path(image_path).name, width_field=width_field,
+                          roads=(Path(roads_path).name if not isinstance(
+                              roads_path, gpd.GeoDataFrame) else "layer"))
+    path = save_model(model, out_path)
+    report(progress, 1.0, "done")
+    return {"model": path, "samples": model.metadata["samples"],
+            "trees": len(model.roots), "road_share": model.metadata["calibrated_road_share"],
+            "roads": len(roads)}
