@@ -1,7 +1,7 @@
 """Grote & Rottensteiner's road extraction from an aerial image, as a composition of stages.
 
 NCut over-segmentation (:mod:`gisroads.imagery.segments`) -> grouping, with the splitting of
-branching segments (:mod:`gisroads.segmentation.grouping`) -> road-part shape filtering
+branching segments (:mod:`gisroads.imagery.grouping`) -> road-part shape filtering
 (:mod:`gisroads.imagery.roadparts`) -> subgraph generation and the integer program over gap
 edges (:mod:`gisroads.network.subgraph`) -> road strings to a network with junctions
 (:mod:`gisroads.network.junctions`). Each stage is a function of its own; this module only
@@ -35,8 +35,8 @@ import numpy as np
 
 from ..geo import GeoRaster, RoadNetwork
 from ..progress import Progress, report, scaled
-from ..segmentation.grouping import group_segments
 from .cues import context_rasters, image_cues
+from .grouping import group_segments
 from ..network.junctions import strings_to_network
 from .roadparts import extract_road_parts
 from .segments import edge_strength, segment_image

@@ -5,7 +5,7 @@ The paper cuts a graph of pixels whose weights combine colour similarity and the
 edges between the pixels (Grote et al. 2007), lowered by a factor ``0 < w_NDVI << 1`` between
 pixels on opposite sides of an NDVI threshold when a near-infrared band is available. The
 over-segmentation must be fine enough that most road borders are segment borders; the
-grouping stage (:mod:`gisroads.segmentation.grouping`) merges the pieces again.
+grouping stage (:mod:`gisroads.imagery.grouping`) merges the pieces again.
 
 What makes it tractable
     A full-pixel NCut of a 1000 x 1000 image is a million-node eigenproblem. The paper keeps
@@ -199,7 +199,7 @@ def segment_image(image: GeoRaster, *, nir_band: int | None = None,
         ``0 < w_NDVI << 1``, the factor across the threshold (1 disables it).
     edge_magnitude : array_like, shape (rows, cols), optional
         Edge strength for the intervening-edge term; default: :func:`edge_strength` (pass
-        it to share one computation with :func:`gisroads.segmentation.grouping.group_segments`).
+        it to share one computation with :func:`gisroads.imagery.grouping.group_segments`).
     seed : int
         Seed of the eigensolver and discretisation: same seed, same segments.
     progress : callable, optional

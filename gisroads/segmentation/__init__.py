@@ -3,8 +3,9 @@
 - :mod:`.ncut`: normalized cuts (Shi & Malik 2000) with Yu & Shi's discretisation, on any
   sparse affinity graph (:func:`.ncut.ncut`) and, over SLIC superpixels, on images
   (intensity, bands, intervening edges, extra pairwise factors).
-- :mod:`.grouping`: iterative merging of adjacent segments with fuzzy rules (Grote &
-  Rottensteiner 2010, 2.1.2) and splitting of segments that span junctions.
+
+The grouping of an image's segments (Grote & Rottensteiner 2010, 2.1.2) is an imagery
+stage: :mod:`gisroads.imagery.grouping`.
 
 The graph function ``ncut`` is not re-exported here, so that ``gisroads.segmentation.ncut``
 stays the module.

@@ -4,7 +4,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingPa
                        QgsProcessingParameterFeatureSink, QgsProcessingParameterNumber)
 
 from gisroads.imagery.segments import frame_to_labels, segments_to_frame
-from gisroads.segmentation.grouping import CRITERIA, MIN_BRANCH_M, group_segments
+from gisroads.imagery.grouping import CRITERIA, MIN_BRANCH_M, group_segments
 
 from ..convert import gisroads_errors, progress_callback
 from .base import GisroadsAlgorithm

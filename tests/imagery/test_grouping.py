@@ -12,7 +12,7 @@ from gisroads.imagery.datasets import ETH_PIXEL_M, LOCAL_CRS
 from gisroads.imagery.segments import segment_image
 from gisroads.io.raster import read_raster
 from gisroads.progress import Cancelled
-from gisroads.segmentation.grouping import (CRITERIA, group_segments, merge_strength,
+from gisroads.imagery.grouping import (CRITERIA, group_segments, merge_strength,
                                             split_branching_segments)
 from gisroads.synthetic import make_scene, render_image
 

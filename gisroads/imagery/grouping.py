@@ -45,10 +45,10 @@ from skimage.measure import label as connected_regions
 from skimage.morphology import skeletonize
 
 from ..geo import GeoRaster
-from ..imagery.cues import ndvi as compute_ndvi, resample_to, scale_bands
-from ..imagery.segments import edge_strength, pixel_size_m
 from ..progress import report
-from .ncut import typical_scale
+from ..segmentation.ncut import typical_scale
+from .cues import ndvi as compute_ndvi, resample_to, scale_bands
+from .segments import edge_strength, pixel_size_m
 
 HISTOGRAM_BINS = 16
 """Bins per band over the stretched [0, 1] range; values are shared linearly between the
