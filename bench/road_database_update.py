@@ -9,7 +9,9 @@ several seeds, and the change layers of gisroads.update.conflate are scored per 
 * ``synthetic_lidar``: the LiDAR pipeline's output on a scene's simulated cloud;
 * ``synthetic_imagery``: the imagery pipeline's output on the same scene's R,G,B,NIR image;
 * ``fusa``: the LiDAR pipeline's output on fusa.laz against its hand-digitised centre lines
-  (``--fusa-roads`` reuses a finished ``gisroads lidar`` GeoPackage).
+  (``--fusa-roads`` reuses a finished ``gisroads lidar`` GeoPackage), fakes kept clear of the
+  paved areas the truth leaves out (gisroads.update.truth_pavement);
+* ``fusa_evidence``: the same with the evidence cue (``--cue evidence``).
 
 Class ``new`` is the deleted roads found again, ``missing`` the fake roads flagged missing.
 
@@ -29,7 +31,7 @@ import geopandas as gpd
 from gisroads.io.vector import read_layer
 from gisroads.jobs import image_job, lidar_job
 from gisroads.synthetic import make_scene, write_cloud, write_image
-from gisroads.update import pooled_scores
+from gisroads.update import FUSA_UNLABELLED_PAVEMENT, pooled_scores, truth_pavement
 
 LIDAR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lidar"
 FUSA_TRUTH = LIDAR / "ground_truth" / "fusa" / "centrelines.geojson"
@@ -41,9 +43,9 @@ def scene_edges(scene) -> gpd.GeoDataFrame:
                                    on="road_id")
 
 
-def lidar_roads(cloud: Path, out: Path) -> gpd.GeoDataFrame:
-    """The LiDAR pipeline's centre lines of ``cloud`` (written to ``out``)."""
-    lidar_job(cloud, out)
+def lidar_roads(cloud: Path, out: Path, cue: str = "intensity") -> gpd.GeoDataFrame:
+    """The LiDAR pipeline's centre lines of ``cloud`` with ``cue`` (written to ``out``)."""
+    lidar_job(cloud, out, cue=cue)
     return read_layer(out)
 
 
@@ -72,9 +74,16 @@ def measure(out: Path, seeds: int = 10, fusa_roads: Path | None = None) -> dict:
     fusa = (read_layer(fusa_roads) if fusa_roads
             else lidar_roads(LIDAR / "fusa.laz", out / "fusa_roads.gpkg"))
     truth = gpd.read_file(FUSA_TRUTH)
-    # a 250 m tile: fake roads 20-40 m long, 15 m clear of the digitised roads
+    # a 250 m tile: fake roads 20-40 m long, 15 m clear of the digitised roads and of the
+    # paved areas they leave out (car-park aisles, the README's unlabelled pavement)
+    pavement = truth_pavement(FUSA_TRUTH.parent, FUSA_UNLABELLED_PAVEMENT)
     results["fusa"] = pooled_scores(fusa, truth, edits, fake_length_m=(20.0, 40.0),
-                                    fake_clearance_m=15.0)
+                                    fake_clearance_m=15.0, pavement=pavement)
+    fusa_evidence = lidar_roads(LIDAR / "fusa.laz", out / "fusa_evidence_roads.gpkg",
+                                cue="evidence")
+    results["fusa_evidence"] = pooled_scores(fusa_evidence, truth, edits,
+                                             fake_length_m=(20.0, 40.0),
+                                             fake_clearance_m=15.0, pavement=pavement)
     return results
 
 

@@ -4,11 +4,12 @@
 layers (``confirmed``, ``missing``, ``new``, ``moved``, ``proposed_update``);
 :func:`read_database` reads a database from any OGR source with its feature ids;
 :func:`edit_database`, :func:`score_changes` and :func:`pooled_scores` make and score a
-benchmark with known changes.
+benchmark with known changes (fakes kept clear of :func:`truth_pavement`).
 """
-from .benchmark import EditedDatabase, edit_database, pooled_scores, score_changes
+from .benchmark import (FUSA_UNLABELLED_PAVEMENT, EditedDatabase, edit_database,
+                        pooled_scores, score_changes, truth_pavement)
 from .conflate import CHANGES, LAYERS, conflate
 from .sources import read_database
 
-__all__ = ["CHANGES", "LAYERS", "EditedDatabase", "conflate", "edit_database",
-           "pooled_scores", "read_database", "score_changes"]
+__all__ = ["CHANGES", "FUSA_UNLABELLED_PAVEMENT", "LAYERS", "EditedDatabase", "conflate",
+           "edit_database", "pooled_scores", "read_database", "score_changes", "truth_pavement"]

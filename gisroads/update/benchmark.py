@@ -5,10 +5,19 @@ changes, and the precision and recall of each change class found by :func:`confl
 roads (``missing``), shifts roads sideways (``moved``) and changes widths (``width``), each on
 a disjoint random share of the truth's lines, seeded. :func:`score_changes` scores the change
 layers against that edit; :func:`pooled_scores` does both over several seeded edits.
+
+Fake roads must lie where there is no road in the data, not merely none in the truth's
+centre lines: a hand-digitised truth leaves out car-park aisles, service ways and other paved
+areas, and a fake placed over them is seen (rightly) by a good extraction and confirmed. So
+fakes keep their clearance from the truth's lines and from ``pavement`` (every other paved
+area the truth knows of: :func:`truth_pavement`), and that clearance should be at least the
+comparison's search distance (15 m), within which a fake could be matched as "moved" onto
+real pavement.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import geopandas as gpd
 import numpy as np
@@ -43,10 +52,46 @@ class EditedDatabase:
     deleted: gpd.GeoDataFrame
 
 
+FUSA_UNLABELLED_PAVEMENT = (
+    (277845.0, 6122400.0, 277885.0, 6122500.0),
+    (277750.0, 6122250.0, 277765.0, 6122350.0),
+)
+"""Paved areas of fusa.laz that its digitised truth leaves out of every layer, as boxes
+(xmin, ymin, xmax, ymax; EPSG:32754) from its README ("Ambiguities and decisions"): the wide
+grey car park between RA and NER, and the grey strip along the west edge south of the
+carriageway. (The kerbed strip at x 277762-277770 beside WR lies within a fake's clearance of
+WR anyway.)"""
+
+
+def truth_pavement(folder, boxes=()) -> gpd.GeoSeries:
+    """Every paved area a ground-truth folder knows of besides its road centre lines:
+    ``road_area.geojson``, the ``service.geojson`` lines buffered by half their ``width_m``
+    (car-park aisles, access ways), and ``boxes`` (xmin, ymin, xmax, ymax, in the truth's
+    CRS) for paved areas the truth describes but leaves out; files that are absent are
+    skipped."""
+    folder = Path(folder)
+    parts, crs = [], None
+    for name in ("road_area.geojson", "service.geojson"):
+        if not (folder / name).is_file():
+            continue
+        layer = gpd.read_file(folder / name)
+        crs = crs or layer.crs
+        geoms = layer.to_crs(crs).geometry
+        if name == "service.geojson":
+            geoms = geoms.buffer(layer["width_m"].astype(float) / 2.0
+                                 if "width_m" in layer else 0.0)
+        parts.extend(geoms.values)
+    if crs is None:
+        crs = gpd.read_file(folder / "centrelines.geojson").crs
+    parts.extend(shapely.box(*box) for box in boxes)
+    return gpd.GeoSeries(parts, crs=crs)
+
+
 def _fake_lines(truth: gpd.GeoDataFrame, count: int, length_m: tuple[float, float],
-                clearance_m: float, rng: np.random.Generator) -> np.ndarray:
+                clearance_m: float, rng: np.random.Generator,
+                pavement: np.ndarray | None = None) -> np.ndarray:
     """``count`` straight lines inside the truth's bounds, each at least ``clearance_m`` from
-    every truth line and from the other fakes."""
+    every truth line, from ``pavement`` (geometries) and from the other fakes."""
     xmin, ymin, xmax, ymax = truth.total_bounds
     n_candidates = 200 * max(count, 1)
     start = rng.uniform([xmin, ymin], [xmax, ymax], (n_candidates, 2))
@@ -56,8 +101,10 @@ def _fake_lines(truth: gpd.GeoDataFrame, count: int, length_m: tuple[float, floa
     candidates = shapely.linestrings(np.stack([start, end], axis=1))
     inside = ((end[:, 0] >= xmin) & (end[:, 0] <= xmax)
               & (end[:, 1] >= ymin) & (end[:, 1] <= ymax))
-    clear = shapely.distance(candidates, shapely.union_all(
-        shapely.force_2d(truth.geometry.values))) >= clearance_m
+    occupied = list(shapely.force_2d(truth.geometry.values))
+    if pavement is not None:
+        occupied.extend(shapely.force_2d(np.asarray(pavement, dtype=object)))
+    clear = shapely.distance(candidates, shapely.union_all(occupied)) >= clearance_m
     chosen: list = []
     for candidate in candidates[inside & clear]:  # a few hundred candidates, greedily
         if len(chosen) == count:
@@ -66,7 +113,7 @@ def _fake_lines(truth: gpd.GeoDataFrame, count: int, length_m: tuple[float, floa
             chosen.append(candidate)
     if len(chosen) < count:
         raise ValueError(f"room for only {len(chosen)} of {count} fake roads "
-                         f"{clearance_m} m clear of the truth")
+                         f"{clearance_m} m clear of the truth and its pavement")
     return np.array(chosen, dtype=object)
 
 
@@ -87,7 +134,7 @@ def edit_database(truth: gpd.GeoDataFrame, *, seed: int = 0, delete_share: float
                   width_share: float = 0.1, shift_m: tuple[float, float] = (5.0, 10.0),
                   width_change_m: tuple[float, float] = (3.0, 6.0),
                   fake_length_m: tuple[float, float] = (40.0, 80.0),
-                  fake_clearance_m: float = 25.0,
+                  fake_clearance_m: float = 25.0, pavement=None,
                   width_field: str = "width_m") -> EditedDatabase:
     """Edit truth centre lines into a road database with known changes.
 
@@ -107,7 +154,12 @@ def edit_database(truth: gpd.GeoDataFrame, *, seed: int = 0, delete_share: float
     fake_length_m : (float, float)
         Range of the fake roads' lengths (metres): straight lines.
     fake_clearance_m : float
-        Fake roads keep at least this distance (metres) from the truth and from each other.
+        Fake roads keep at least this distance (metres) from the truth, from ``pavement``
+        and from each other.
+    pavement : GeoSeries or array of geometries, optional
+        Paved areas the truth's lines do not hold (car-park aisles, service ways, squares:
+        :func:`truth_pavement`), in the truth's CRS: fakes keep clear of them too, so that a
+        fake is a road that is not there.
     width_field : str
 
     Returns
@@ -155,8 +207,9 @@ def edit_database(truth: gpd.GeoDataFrame, *, seed: int = 0, delete_share: float
     n_fakes = int(round(fake_share * n))
     fakes = lines.iloc[rng.integers(0, n, n_fakes)].copy()
     fakes[fakes.geometry.name] = gpd.GeoSeries(
-        _fake_lines(truth, n_fakes, fake_length_m, fake_clearance_m, rng), index=fakes.index,
-        crs=truth.crs)
+        _fake_lines(truth, n_fakes, fake_length_m, fake_clearance_m, rng,
+                    None if pavement is None else _in_crs(pavement, truth.crs)),
+        index=fakes.index, crs=truth.crs)
     kept = kind != "deleted"
     database = pd.concat([lines[kept], fakes], ignore_index=True)
     database.insert(0, "db_id", np.arange(1001, 1001 + len(database), dtype=np.int64))
@@ -165,6 +218,14 @@ def edit_database(truth: gpd.GeoDataFrame, *, seed: int = 0, delete_share: float
     return EditedDatabase(gpd.GeoDataFrame(database, geometry=truth.geometry.name,
                                            crs=truth.crs),
                           edit, truth.reset_index(drop=True)[~kept])
+
+
+def _in_crs(geometries, crs) -> np.ndarray:
+    """Geometries as an array in ``crs`` (a GeoSeries/GeoDataFrame is reprojected)."""
+    if isinstance(geometries, (gpd.GeoSeries, gpd.GeoDataFrame)):
+        geometries = (geometries.to_crs(crs) if geometries.crs is not None
+                      else geometries).geometry.values
+    return np.asarray(geometries, dtype=object)
 
 
 def _covered_share(lines: np.ndarray, cover: np.ndarray, buffer_m: float) -> np.ndarray:

@@ -9,7 +9,8 @@ from affine import Affine
 from gisroads.geo import GeoRaster
 from gisroads.io.vector import write_geopackage
 from gisroads.synthetic import make_scene
-from gisroads.update import LAYERS, conflate, edit_database, read_database, score_changes
+from gisroads.update import (FUSA_UNLABELLED_PAVEMENT, LAYERS, conflate, edit_database,
+                             read_database, score_changes, truth_pavement)
 
 DATABASE_CRS = "EPSG:4326"  # degrees: the matching must reproject to the extraction's metres
 
@@ -236,3 +237,36 @@ def test_edit_database_is_seeded_and_disjoint():
     rewidened = database.loc[edited.edit.index[edited.edit == "width"]]
     change = rewidened["width_m"] - original.loc[rewidened["edge_id"], "width_m"].to_numpy()
     assert change.abs().between(3.0, 6.0).all()
+
+
+def test_fakes_keep_clear_of_pavement_the_truth_lines_leave_out():
+    """A fake over a car park or service way the truth's lines leave out is a road in the
+    data, confirmed by a good extraction: fakes keep their clearance from such pavement."""
+    scene = make_scene(seed=1, size_m=(1000.0, 700.0))
+    truth = truth_edges(scene)
+    # where the seed-5 fakes fall without it: pavement in the truth's tables only
+    fakes = edit_database(truth, seed=5).database.iloc[-round(0.1 * len(truth)):]
+    pavement = gpd.GeoSeries(fakes.geometry.values, crs=truth.crs).buffer(4.0)
+    for seed in (5, 0, 1):
+        edited = edit_database(truth, seed=seed, pavement=pavement)
+        placed = edited.database[edited.edit.to_numpy() == "fake"]
+        assert len(placed) == round(0.1 * len(truth))
+        assert (shapely.distance(placed.geometry.values,
+                                 shapely.union_all(pavement.values)) >= 25.0).all()
+
+
+def test_truth_pavement_holds_service_ways_road_area_and_described_areas(lidar_dir):
+    folder = lidar_dir / "ground_truth" / "fusa"
+    pavement = truth_pavement(folder, FUSA_UNLABELLED_PAVEMENT)
+    assert pavement.crs.to_epsg() == 32754
+    service = gpd.read_file(folder / "service.geojson")
+    area = shapely.union_all(pavement.values)
+    assert shapely.covers(area, shapely.union_all(service.geometry.values))
+    for box in FUSA_UNLABELLED_PAVEMENT:
+        assert shapely.covers(area, shapely.box(*box))
+    truth = gpd.read_file(folder / "centrelines.geojson")
+    for seed in range(10):
+        edited = edit_database(truth, seed=seed, fake_length_m=(20.0, 40.0),
+                               fake_clearance_m=15.0, pavement=pavement)
+        fake = edited.database[edited.edit.to_numpy() == "fake"].geometry.values
+        assert (shapely.distance(fake, area) >= 15.0).all()
