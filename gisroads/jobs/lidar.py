@@ -9,8 +9,6 @@ from pathlib import Path
 import numpy as np
 from pyproj import Transformer
 
-from ..blocks import (MAX_EDGE_M, MIN_BLOCK_AREA_M2, ROAD_FRACTION, SAMPLE_SPACING_M,
-                      city_blocks, road_likelihood, thin_points)
 from ..errors import NoRoadFoundWarning
 from ..features.edges import local_energy
 from ..geo import POLYGONS, GeoRaster
@@ -18,6 +16,8 @@ from ..io.las import cloud_crs, iter_las_chunks, read_las
 from ..io.quicklook import write_quicklook
 from ..io.raster import read_raster, write_geotiff
 from ..io.vector import list_layers, read_layer, write_geopackage
+from ..lidar.blocks import (MAX_EDGE_M, MIN_BLOCK_AREA_M2, ROAD_FRACTION, SAMPLE_SPACING_M,
+                            city_blocks, road_likelihood, thin_points)
 from ..lidar.ground import ground_planes
 from ..lidar.hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, T_BD, T_INT,
                                 likelihood_maps, road_hypotheses)
@@ -339,12 +339,12 @@ def blocks_job(likelihood_path, out_path, *, points_path=None, quicklook=None,
     """City blocks (Zhu & Mordohai, section 5) of a road-likelihood raster into a GeoPackage.
 
     ``likelihood_path``: a ``*_likelihood_level_*.tif`` of ``gisroads lidar --rasters`` or
-    any single-band road-probability raster (see :func:`gisroads.blocks.road_likelihood`).
+    any single-band road-probability raster (see :func:`gisroads.lidar.blocks.road_likelihood`).
     ``points_path``: a LAS/LAZ whose ground points (class 2; every point when the file has
     none) are the graph's nodes, streamed and thinned chunk by chunk, reprojected to the
     raster's CRS. Writes the ``city_blocks`` layer to ``out_path`` and optionally a
     ``quicklook`` PNG of the blocks over the likelihood. The parameters from
-    ``sample_spacing_m`` on are those of :func:`gisroads.blocks.city_blocks`.
+    ``sample_spacing_m`` on are those of :func:`gisroads.lidar.blocks.city_blocks`.
     """
     raster = read_raster(likelihood_path)
     points = None

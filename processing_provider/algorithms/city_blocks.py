@@ -3,7 +3,7 @@ from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFile,
                        QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterLayer)
 
-from gisroads.blocks import MAX_EDGE_M, SAMPLE_SPACING_M
+from gisroads.lidar.blocks import MAX_EDGE_M, SAMPLE_SPACING_M
 from gisroads.jobs import blocks_job
 
 from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback

@@ -44,10 +44,10 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from skimage.segmentation import watershed
 
-from .geo import GeoRaster
-from .lidar.hypotheses import L_MAX
-from .progress import Progress, report, scaled
-from .segmentation.ncut import leading_eigenpairs, ncut
+from ..geo import GeoRaster
+from ..progress import Progress, report, scaled
+from ..segmentation.ncut import leading_eigenpairs, ncut
+from .hypotheses import L_MAX
 
 MAX_EDGE_M = 80.0
 """Nodes closer than this are joined (paper, section 5: 80 m)."""

@@ -13,7 +13,7 @@ from pyproj import CRS
 from rasterio import features
 from scipy import ndimage
 
-from gisroads.blocks import (block_affinity, block_nodes, city_blocks,
+from gisroads.lidar.blocks import (block_affinity, block_nodes, city_blocks,
                              max_likelihood_between, road_likelihood, thin_points)
 from gisroads.geo import GeoRaster
 from gisroads.io.las import LasPointWriter
