@@ -612,7 +612,7 @@ def case_snakes(out: Path, size_m: float, density: float) -> dict:
 
 def _short_spurs(lines, spur_m: float) -> int:
     """Dangling lines (one free end, the other at a junction) shorter than ``spur_m``."""
-    from gisroads.evaluate.topology import line_graph
+    from gisroads.geo import line_graph
     graph = line_graph(lines)
     degree = graph.degree[graph.edges]
     dangling = (degree.min(axis=1) == 1) & (degree.max(axis=1) >= 3)

@@ -21,6 +21,8 @@ import pandas as pd
 import shapely
 from affine import Affine
 from pyproj import CRS
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
 
 CENTRELINES = "road_centrelines"
 POLYGONS = "road_polygons"
@@ -141,6 +143,17 @@ def node_lines(lines) -> np.ndarray:
     return shapely.get_parts(shapely.union_all(shapely.get_parts(lines)))
 
 
+def _end_nodes(lines: np.ndarray, snap_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct end points of ``m`` noded lines (ends closer than ``snap_m`` are one)
+    and the node of each of their ``2 m`` ends (the first points, then the last points)."""
+    ends = np.concatenate([shapely.get_coordinates(shapely.get_point(lines, 0)),
+                           shapely.get_coordinates(shapely.get_point(lines, -1))])
+    keys = np.round(ends / snap_m).astype(np.int64)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    # numpy 2.0 returns the inverse of an axis=0 unique as a column, 1.x and 2.1+ flat.
+    return ends[first], inverse.reshape(-1)
+
+
 def line_end_degrees(lines, *, snap_m: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
     """End points of noded lines and how many line ends meet at each.
 
@@ -159,12 +172,73 @@ def line_end_degrees(lines, *, snap_m: float = 1e-6) -> tuple[np.ndarray, np.nda
     lines = np.asarray(lines, dtype=object)
     if len(lines) == 0:
         return np.empty((0, 2)), np.empty(0, dtype=np.int64)
-    ends = np.concatenate([shapely.get_coordinates(shapely.get_point(lines, 0)),
-                           shapely.get_coordinates(shapely.get_point(lines, -1))])
-    keys = np.round(ends / snap_m).astype(np.int64)
-    _, first, inverse, degree = np.unique(keys, axis=0, return_index=True,
-                                          return_inverse=True, return_counts=True)
-    return ends[first], degree
+    nodes, node_of_end = _end_nodes(lines, snap_m)
+    return nodes, np.bincount(node_of_end, minlength=len(nodes))
+
+
+@dataclass(frozen=True)
+class LineGraph:
+    """A noded line network as a graph.
+
+    Attributes
+    ----------
+    lines : ndarray of LineString, shape (m,)
+        Noded lines; line ``i`` runs from node ``edges[i, 0]`` to node ``edges[i, 1]``.
+    nodes : ndarray, shape (n, 2)
+        Node coordinates.
+    edges : ndarray of int, shape (m, 2)
+    lengths : ndarray, shape (m,)
+        Edge lengths in CRS units.
+    """
+
+    lines: np.ndarray
+    nodes: np.ndarray
+    edges: np.ndarray
+    lengths: np.ndarray
+
+    @property
+    def degree(self) -> np.ndarray:
+        """Line ends meeting at each node (a loop counts twice)."""
+        return np.bincount(self.edges.ravel(), minlength=len(self.nodes))
+
+    def adjacency(self) -> csr_matrix:
+        """Sparse ``(n, n)`` edge-length matrix, for ``scipy.sparse.csgraph`` with
+        ``directed=False``: one entry per node pair (the shortest of parallel edges), loops
+        left out."""
+        low, high = np.sort(self.edges, axis=1).T
+        keep = low != high
+        low, high, lengths = low[keep], high[keep], self.lengths[keep]
+        # csr_matrix sums duplicate entries; parallel edges must give their minimum instead.
+        order = np.lexsort((lengths, high, low))
+        low, high, lengths = low[order], high[order], lengths[order]
+        first = np.ones(len(low), dtype=bool)
+        first[1:] = (low[1:] != low[:-1]) | (high[1:] != high[:-1])
+        n = len(self.nodes)
+        return csr_matrix((lengths[first], (low[first], high[first])), shape=(n, n))
+
+    def components(self) -> tuple[int, np.ndarray]:
+        """Number of connected components and the component label of each node."""
+        count, labels = connected_components(self.adjacency(), directed=False)
+        return int(count), labels
+
+
+def line_graph(lines, *, snap_m: float = 1e-6) -> LineGraph:
+    """Graph of a line network: the lines noded (:func:`node_lines`), every noded line an
+    edge weighted by its length, end points closer than ``snap_m`` one node.
+
+    Parameters
+    ----------
+    lines : array_like of (Multi)LineString
+    snap_m : float
+        End points closer than this (CRS units) are one node.
+    """
+    noded = node_lines(lines)
+    if len(noded) == 0:
+        return LineGraph(lines=noded, nodes=np.empty((0, 2)),
+                         edges=np.empty((0, 2), dtype=np.int64), lengths=np.empty(0))
+    nodes, node_of_end = _end_nodes(noded, snap_m)
+    return LineGraph(lines=noded, nodes=nodes, edges=node_of_end.reshape(2, -1).T.copy(),
+                     lengths=shapely.length(noded))
 
 
 def junctions_from_lines(lines, crs, *, snap_m: float = 1e-6) -> gpd.GeoDataFrame:

@@ -2,7 +2,7 @@
 
 What is computed
 ----------------
-Each network is read as a graph (:func:`gisroads.evaluate.topology.line_graph`): noded lines
+Each network is read as a graph (:func:`gisroads.geo.line_graph`): noded lines
 are edges weighted by their length, line ends are nodes.
 
 One half, ``APLS(S → T)``, scores a target network ``T`` against a source network ``S``:
@@ -44,8 +44,8 @@ import numpy as np
 import shapely
 from scipy.sparse.csgraph import dijkstra
 
+from ..geo import LineGraph, line_graph
 from .buffer import metric_lines, nearest_on_lines, pieces_needed
-from .topology import LineGraph, line_graph
 
 #: Most entries of one block of the shortest-path matrix (sources x nodes) held at once.
 _MAX_DISTANCE_ENTRIES = 1 << 24

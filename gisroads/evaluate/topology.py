@@ -1,93 +1,23 @@
 """Topology metrics: connected components and junctions of centre-line networks.
 
-A network is read as a graph: the lines are noded (split at every crossing and shared vertex,
-overlaps dissolved, :func:`gisroads.geo.node_lines`), every noded line is an edge weighted by
-its length, and line end points closer than ``snap_m`` are one node. A node's degree is the
+A network is read as a graph (:func:`gisroads.geo.line_graph`): the lines are noded (split
+at every crossing and shared vertex, overlaps dissolved, :func:`gisroads.geo.node_lines`),
+every noded line is an edge weighted by its length, and line end points closer than
+``snap_m`` are one node. A node's degree is the
 number of line ends meeting there; junctions are nodes of degree 3 or more, as in
 :func:`gisroads.geo.junctions_from_lines`.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import shapely
 from scipy.optimize import linear_sum_assignment
-from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ..geo import node_lines
+from ..geo import LineGraph, line_graph
 from .buffer import align_to_reference, metric_lines, typed_parts
-
-
-@dataclass(frozen=True)
-class LineGraph:
-    """A noded line network as a graph.
-
-    Attributes
-    ----------
-    lines : ndarray of LineString, shape (m,)
-        Noded lines; line ``i`` runs from node ``edges[i, 0]`` to node ``edges[i, 1]``.
-    nodes : ndarray, shape (n, 2)
-        Node coordinates.
-    edges : ndarray of int, shape (m, 2)
-    lengths : ndarray, shape (m,)
-        Edge lengths in CRS units.
-    """
-
-    lines: np.ndarray
-    nodes: np.ndarray
-    edges: np.ndarray
-    lengths: np.ndarray
-
-    @property
-    def degree(self) -> np.ndarray:
-        """Line ends meeting at each node (a loop counts twice)."""
-        return np.bincount(self.edges.ravel(), minlength=len(self.nodes))
-
-    def adjacency(self) -> csr_matrix:
-        """Sparse ``(n, n)`` edge-length matrix, for ``scipy.sparse.csgraph`` with
-        ``directed=False``: one entry per node pair (the shortest of parallel edges), loops
-        left out."""
-        low, high = np.sort(self.edges, axis=1).T
-        keep = low != high
-        low, high, lengths = low[keep], high[keep], self.lengths[keep]
-        # csr_matrix sums duplicate entries; parallel edges must give their minimum instead.
-        order = np.lexsort((lengths, high, low))
-        low, high, lengths = low[order], high[order], lengths[order]
-        first = np.ones(len(low), dtype=bool)
-        first[1:] = (low[1:] != low[:-1]) | (high[1:] != high[:-1])
-        n = len(self.nodes)
-        return csr_matrix((lengths[first], (low[first], high[first])), shape=(n, n))
-
-    def components(self) -> tuple[int, np.ndarray]:
-        """Number of connected components and the component label of each node."""
-        count, labels = connected_components(self.adjacency(), directed=False)
-        return int(count), labels
-
-
-def line_graph(lines, *, snap_m: float = 1e-6) -> LineGraph:
-    """Graph of a line network, noded first (see the module docstring).
-
-    Parameters
-    ----------
-    lines : array_like of (Multi)LineString
-    snap_m : float
-        End points closer than this (CRS units) are one node.
-    """
-    noded = node_lines(lines)
-    if len(noded) == 0:
-        return LineGraph(lines=noded, nodes=np.empty((0, 2)),
-                         edges=np.empty((0, 2), dtype=np.int64), lengths=np.empty(0))
-    ends = np.concatenate([shapely.get_coordinates(shapely.get_point(noded, 0)),
-                           shapely.get_coordinates(shapely.get_point(noded, -1))])
-    keys = np.round(ends / snap_m).astype(np.int64)
-    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-    # numpy 2.0 returns the inverse of an axis=0 unique as a column, 1.x and 2.1+ flat.
-    edges = inverse.reshape(2, -1).T.copy()
-    return LineGraph(lines=noded, nodes=ends[first], edges=edges,
-                     lengths=shapely.length(noded))
 
 
 def _match_count(a: np.ndarray, b: np.ndarray, radius_m: float) -> int:

@@ -48,8 +48,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ..evaluate.topology import line_graph
-from ..geo import RoadNetwork, network_from_centrelines
+from ..geo import RoadNetwork, line_graph, network_from_centrelines
 
 #: Defaults of the shared steps (the papers give none): ends within 5 m, about half a
 #: two-lane road, continue each other; 20 degrees separates continuing pieces from branches
