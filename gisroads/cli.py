@@ -670,9 +670,7 @@ def _cancel_on_sigterm():
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    from .errors import reported_warnings
-    from .io.las import LasError
-    from .io.raster import RasterError
+    from .errors import INPUT_ERRORS, reported_warnings
     notes = []
     _ProgressBar.json_lines = getattr(args, "progress_json", False)
     _ProgressBar.terminated = False
@@ -692,7 +690,7 @@ def main(argv=None) -> int:
         for stream in (sys.stdout, sys.stderr):
             os.dup2(devnull, stream.fileno())
         return 141
-    except (LasError, RasterError, ValueError, FileNotFoundError) as err:
+    except INPUT_ERRORS as err:
         _ProgressBar.close_all()
         print(f"gisroads: error: {_error_text(err, args)}", file=sys.stderr)
         return 2

@@ -1,15 +1,39 @@
-"""What gisroads reports beside its results: warnings about valid but notable outcomes.
+"""What gisroads reports beside its results: the errors of inputs it cannot work on, and
+warnings about valid but notable outcomes.
 
-The command line prints a :class:`GisroadsWarning` as one line, ``gisroads: warning: ...``,
-and the QGIS algorithms push it to their feedback; Python callers get it through
-:mod:`warnings` (``warnings.simplefilter("error", NoRoadFoundWarning)`` turns it into an
-exception for those who want one).
+Errors: :class:`GisroadsError` (a ValueError) is the family of gisroads' own input errors:
+:class:`~gisroads.io.las.LasError`, :class:`~gisroads.io.raster.RasterError` (and its
+:class:`~gisroads.io.raster.NotGeoreferencedError`), :class:`MissingFileError`. The stages'
+argument checks raise a plain ValueError, their documented contract. The command line and
+the QGIS algorithms catch :data:`INPUT_ERRORS`, each in one place, and report them as one
+line (``gisroads: error: ...``, a QgsProcessingException); anything else is a bug and keeps
+its traceback.
+
+Warnings: the command line prints a :class:`GisroadsWarning` as one line,
+``gisroads: warning: ...``, and the QGIS algorithms push it to their feedback; Python
+callers get it through :mod:`warnings` (``warnings.simplefilter("error",
+NoRoadFoundWarning)`` turns it into an exception for those who want one).
 """
 from __future__ import annotations
 
 import warnings
 from contextlib import contextmanager
 from typing import Callable, Iterator
+
+
+class GisroadsError(ValueError):
+    """An input gisroads cannot work on (a file missing, unreadable or of the wrong kind), or
+    a job left with nothing it could write."""
+
+
+class MissingFileError(GisroadsError, FileNotFoundError):
+    """An input file that does not exist (also a FileNotFoundError)."""
+
+
+INPUT_ERRORS = (ValueError, FileNotFoundError)
+"""What the command line and the QGIS algorithms report as a one-line error: the
+:class:`GisroadsError` family and the ValueError of a stage's argument check (both
+ValueErrors), and a file a library found missing on its own."""
 
 
 class GisroadsWarning(UserWarning):

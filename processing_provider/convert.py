@@ -13,9 +13,7 @@ from qgis.core import (QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink,
                        QgsProcessingLayerPostProcessorInterface, QgsVectorLayer, QgsWkbTypes)
 from qgis.PyQt.QtCore import QVariant
 
-from gisroads.errors import reported_warnings
-from gisroads.io.las import LasError
-from gisroads.io.raster import RasterError
+from gisroads.errors import INPUT_ERRORS, reported_warnings
 from gisroads.io.vector import STYLES_DIR
 from gisroads.progress import Cancelled
 
@@ -129,7 +127,7 @@ def gisroads_errors(feedback=None):
             yield
     except Cancelled:
         raise QgsProcessingException("cancelled; nothing was written") from None
-    except (LasError, RasterError, ValueError, FileNotFoundError) as err:
+    except INPUT_ERRORS as err:
         raise QgsProcessingException(str(err)) from None
 
 

@@ -17,6 +17,7 @@ import laspy
 import numpy as np
 from pyproj import CRS
 
+from ..errors import GisroadsError
 from .vector import atomic_path
 
 DEFAULT_CHUNK = 2_000_000
@@ -27,7 +28,7 @@ _GEOTIFF_VERTICAL_UNITS = {9001: ("metre", 1.0), 9002: ("foot", 0.3048),
                            9003: ("US survey foot", 0.3048006096012192)}
 
 
-class LasError(ValueError):
+class LasError(GisroadsError):
     """A LAS/LAZ file that cannot be used: missing, empty, truncated or corrupt."""
 
 

@@ -15,11 +15,12 @@ from affine import Affine
 from pyproj import CRS
 from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from .vector import atomic_path
 
 
-class RasterError(ValueError):
+class RasterError(GisroadsError):
     """A raster that cannot be used as given: unreadable, not georeferenced, or all NaN."""
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import geopandas as gpd
 
+from ..errors import MissingFileError
 from ..geo import CONTRACT_GEOMETRY
 from ..resources import styles_dir
 
@@ -163,7 +164,7 @@ def read_layer(path, layer: str | None = None, *, crs=None) -> gpd.GeoDataFrame:
     """
     path = Path(path)
     if not path.exists():
-        raise FileNotFoundError(f"{path}: no such file")
+        raise MissingFileError(f"{path}: no such file")
     if layer is None and path.suffix.lower() == ".gpkg":
         names = list_layers(path)
         layer = "road_centrelines" if "road_centrelines" in names else names[0]

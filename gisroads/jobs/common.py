@@ -10,7 +10,7 @@ from pathlib import Path
 import geopandas as gpd
 import numpy as np
 
-from ..errors import NoRoadFoundWarning
+from ..errors import GisroadsError, MissingFileError, NoRoadFoundWarning
 from ..geo import CENTRELINES, GeoRaster, RoadNetwork
 from ..imagery.datasets import warp_to_utm
 from ..io.las import las_info
@@ -33,9 +33,10 @@ def parse_metres(text: str, name: str = "value") -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in text.replace(";", ",").split(",") if v.strip())
     except ValueError:
-        raise ValueError(f"{name}: {text!r} is not a comma-separated list of metres") from None
+        raise GisroadsError(f"{name}: {text!r} is not a comma-separated list of "
+                            "metres") from None
     if not values or min(values) <= 0:
-        raise ValueError(f"{name}: give positive metres, e.g. 6,9,12")
+        raise GisroadsError(f"{name}: give positive metres, e.g. 6,9,12")
     return values
 
 
@@ -61,6 +62,8 @@ def describe_file(path) -> dict:
     if suffix in {".las", ".laz"}:
         return _plain({"kind": "point cloud", **las_info(path)})
     if suffix in VECTOR_SUFFIXES:
+        if not path.exists():  # else sqlite would create the GeoPackage it cannot open
+            raise MissingFileError(f"{path}: no such file")
         names = list_layers(path) if suffix == ".gpkg" else [None]
         declared = layer_geometry_types(path) if suffix == ".gpkg" else {}
         layers = []
@@ -139,7 +142,7 @@ def _map_lines(map_source) -> gpd.GeoDataFrame:
     if isinstance(map_source, gpd.GeoDataFrame):
         return map_source
     if not Path(map_source).is_file():
-        raise ValueError(f"{map_source}: no such road map file")
+        raise MissingFileError(f"{map_source}: no such road map file")
     gpkg = str(map_source).lower().endswith(".gpkg")
     return read_layer(map_source, CENTRELINES if gpkg and CENTRELINES in
                       list_layers(map_source) else None)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import geopandas as gpd
 
+from ..errors import GisroadsError
 from ..evaluate import evaluate_network, match_layers
 from ..geo import POLYGONS
 from ..io.raster import write_geotiff
@@ -87,7 +88,7 @@ def evaluate_job(extracted, reference, *,
     extracted_lines = read_layer(extracted)
     reference_lines = read_layer(reference)
     if len(reference_lines) == 0:
-        raise ValueError(f"{reference}: the reference holds no road")
+        raise GisroadsError(f"{reference}: the reference holds no road")
     predicted = (read_layer(extracted_polygons) if extracted_polygons
                  else _read_polygons(extracted))
     truth = read_layer(reference_polygons) if reference_polygons else _read_polygons(reference)

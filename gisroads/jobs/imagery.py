@@ -6,6 +6,7 @@ from pathlib import Path
 
 import geopandas as gpd
 
+from ..errors import GisroadsError
 from ..imagery.pipeline import PROBABILITY_THRESHOLD, extract_image_roads, resolve_model
 from ..io.raster import read_raster, write_geotiff
 from ..learn.model import save_model, with_metadata
@@ -43,11 +44,11 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     band_count = image.data.shape[0] if image.data.ndim == 3 else 1
     for name, band in (("NIR", nir_band), ("red", red_band)):
         if band is not None and not 1 <= band <= band_count:
-            raise ValueError(f"{image_path}: no {name} band {band} (the image has "
+            raise GisroadsError(f"{image_path}: no {name} band {band} (the image has "
                              f"{band_count} band(s))")
     model = resolve_model(model)
     if probability_path is not None and model is None:
-        raise ValueError("a road probability raster needs a model (not --model none)")
+        raise GisroadsError("a road probability raster needs a model (not --model none)")
     dsm = read_raster(dsm_path) if dsm_path is not None else None
     roads = extract_image_roads(
         image, nir_band=nir_band, red_band=red_band, dsm=dsm, model=model, method=method,
@@ -93,17 +94,17 @@ def train_job(image_path, roads_path, out_path, *, width_field: str | None = Non
     image, _ = read_image(image_path, pixel_m=pixel_m, crs=crs)
     roads = _map_lines(roads_path)
     if roads.crs is None and image.crs is not None:
-        raise ValueError(f"{roads_path}: the road layer has no CRS; cannot place it on the "
+        raise GisroadsError(f"{roads_path}: the road layer has no CRS; cannot place it on the "
                          "image")
     if width_field is not None and width_field not in roads.columns:
-        raise ValueError(f"{roads_path}: no field {width_field!r} (fields: "
+        raise GisroadsError(f"{roads_path}: no field {width_field!r} (fields: "
                          f"{', '.join(c for c in roads.columns if c != 'geometry')})")
     if width_m <= 0 or guard_m < 0:
-        raise ValueError("the width must be positive and the guard band at least 0 m")
+        raise GisroadsError("the width must be positive and the guard band at least 0 m")
     try:
         import sklearn  # noqa: F401  (optional: checked here to say what is missing)
     except ImportError:
-        raise ValueError("training needs scikit-learn (pip install scikit-learn, or the "
+        raise GisroadsError("training needs scikit-learn (pip install scikit-learn, or the "
                          "python3-sklearn package)") from None
     report(progress, 0.0, "sampling the image along the roads")
     model = train_from_layer(image, roads, width_field=width_field, default_width_m=width_m,

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from pyproj import Transformer
 
-from ..errors import NoRoadFoundWarning
+from ..errors import GisroadsError, NoRoadFoundWarning
 from ..features.edges import local_energy
 from ..geo import POLYGONS, GeoRaster
 from ..io.las import cloud_crs, iter_las_chunks, read_las
@@ -67,7 +67,7 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
     # one file, several, a folder or a glob (extract_roads); tagging copies one file
     inputs = las_inputs(cloud_path)
     if tagged_las is not None and len(inputs) > 1:
-        raise ValueError(f"a tagged LAS/LAZ copy is made of one input file, not of "
+        raise GisroadsError(f"a tagged LAS/LAZ copy is made of one input file, not of "
                          f"{len(inputs)}: tag each file on its own")
     cloud_path = inputs[0] if len(inputs) == 1 else cloud_path
     roads = extract_roads(
@@ -147,7 +147,7 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
 def _level_image(intensity_path, level: int) -> GeoRaster:
     raster = read_raster(intensity_path)
     if not 0 <= level < raster.data.shape[0]:
-        raise ValueError(f"{intensity_path}: no level {level} (it has "
+        raise GisroadsError(f"{intensity_path}: no level {level} (it has "
                          f"{raster.data.shape[0]} band(s), levels 0..{raster.data.shape[0] - 1})")
     return GeoRaster(raster.data[level].astype("float32"), raster.transform, raster.crs,
                      raster.nodata)
@@ -167,7 +167,7 @@ def ground_intensity_job(cloud_path, intensity_path, *, heights_path=None, cell_
     """
     cloud = read_las(cloud_path)
     if cloud.intensity is None:
-        raise ValueError(f"{cloud_path}: the point cloud records no intensity")
+        raise GisroadsError(f"{cloud_path}: the point cloud records no intensity")
     bounds = (*cloud.xyz[:, :2].min(axis=0), *cloud.xyz[:, :2].max(axis=0))
     if cell_m is None:
         cell_m = auto_cell_m(len(cloud), (bounds[2] - bounds[0]) * (bounds[3] - bounds[1]))
@@ -195,7 +195,7 @@ def evidence_job(cloud_path, out_path, *, cell_m: float | None = None,
     likelihood, _, used, missing = evidence_raster(cloud_path, cell_m=cell_m, tile_m=tile_m,
                                                 overlap_m=overlap_m, progress=progress)
     if likelihood is None:
-        raise ValueError(f"{cloud_path}: no tile holds enough points to image")
+        raise GisroadsError(f"{cloud_path}: no tile holds enough points to image")
     write_geotiff(out_path, likelihood, band_names=["road_likelihood"])
     return {"raster": Path(out_path), "cell_m": likelihood.pixel_size,
             "cues": ",".join(used),
@@ -240,7 +240,7 @@ def likelihood_job(intensity_path, segments_path, likelihood_path, hypotheses_pa
     image = _level_image(intensity_path, level)
     segments = read_raster(segments_path)
     if segments.data.shape[1:] != image.data.shape or segments.transform != image.transform:
-        raise ValueError(f"{segments_path} is not on the grid of {intensity_path}")
+        raise GisroadsError(f"{segments_path} is not on the grid of {intensity_path}")
     widths_m = tuple(widths_m)
     report(progress, 0.05, "edges")
     magnitude, orientation = local_energy(image.data)
@@ -269,10 +269,12 @@ def min_cover_job(hypotheses_path, likelihood_path, rectangles_path, *, exact: b
     hypotheses = _layer(hypotheses_path, "hypotheses")
     missing = {"hyp_id", "theta_rad", "width_index", "width_m"} - set(hypotheses.columns)
     if missing:
-        raise ValueError(f"{hypotheses_path}: not a hypotheses layer (no {sorted(missing)})")
+        raise GisroadsError(f"{hypotheses_path}: not a hypotheses layer "
+                            f"(no {sorted(missing)})")
     likelihood = read_raster(likelihood_path)
     if hypotheses.width_index.max() >= likelihood.data.shape[0]:
-        raise ValueError(f"{likelihood_path} has fewer width bands than the hypotheses use")
+        raise GisroadsError(f"{likelihood_path} has fewer width bands than the hypotheses "
+                            "use")
     if exact:
         selected = exact_min_cover(hypotheses, likelihood, l_max=l_max, a=a,
                                    seed_step_m=seed_step_m)
@@ -293,7 +295,8 @@ def rectangles_network_job(rectangles_path, out_path) -> dict:
     rectangles = _layer(rectangles_path, "rectangles")
     missing = {"width_m", "theta_rad"} - set(rectangles.columns)
     if missing:
-        raise ValueError(f"{rectangles_path}: the rectangles need fields {sorted(missing)}")
+        raise GisroadsError(f"{rectangles_path}: the rectangles need fields "
+                            f"{sorted(missing)}")
     network = rectangles_to_network(rectangles)
     network.qa = {"rectangles": rectangles}
     write_geopackage(out_path, network.layers())
@@ -356,7 +359,8 @@ def blocks_job(likelihood_path, out_path, *, points_path=None, quicklook=None,
                          min_block_area_m2=min_block_area_m2, seed=seed,
                          progress=scaled(progress, 0.0, 0.9))
     if len(blocks) == 0:
-        raise ValueError(f"{likelihood_path}: no city block of the minimum area was found")
+        raise GisroadsError(f"{likelihood_path}: no city block of the minimum area was "
+                            "found")
     write_geopackage(out_path, {"city_blocks": blocks})
     result = {"gpkg": Path(out_path), "blocks": len(blocks),
               "segments": int(blocks.segment.nunique()),

@@ -7,6 +7,7 @@ from pathlib import Path
 import geopandas as gpd
 import shapely
 
+from ..errors import GisroadsError
 from ..io.las import cloud_crs
 from ..io.raster import write_geotiff
 from ..io.vector import read_layer, write_geopackage
@@ -84,10 +85,11 @@ def register_job(cloud_path, map_source, out_path, *,
     lines = map_source if isinstance(map_source, gpd.GeoDataFrame) else read_layer(map_source)
     lines = lines[lines.geometry.notna() & ~lines.geometry.is_empty]
     if len(lines) == 0:
-        raise ValueError(f"{map_source}: the map holds no line")
+        raise GisroadsError(f"{map_source}: the map holds no line")
     if working is not None:
         if lines.crs is None:
-            raise ValueError(f"{map_source}: the map has no CRS; cannot match it to the cloud")
+            raise GisroadsError(f"{map_source}: the map has no CRS; cannot match it to the "
+                                "cloud")
         lines = lines.to_crs(working)
     report(progress, 0.0, "reading the points along the map")
     # Intersections move line ends by up to the snapping tolerance: read that much wider.
@@ -95,8 +97,8 @@ def register_job(cloud_path, map_source, out_path, *,
     along = shapely.get_coordinates(shapely.segmentize(lines.geometry.values, 0.5))
     cloud, _ = read_corridor(cloud_path, along, reach)
     if len(cloud) == 0:
-        raise ValueError(f"{cloud_path}: no point lies along the map's lines; "
-                         "does the map cover the cloud?")
+        raise GisroadsError(f"{cloud_path}: no point lies along the map's lines; "
+                            "does the map cover the cloud?")
     registered = register_map(lines, cloud, control_spacing_m=control_spacing_m,
                               sample_spacing_m=sample_spacing_m,
                               support_radius_m=support_radius_m, max_incline=max_incline,
