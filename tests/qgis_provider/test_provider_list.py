@@ -1,0 +1,28 @@
+"""The provider's explicit algorithm list holds every algorithm class of ``algorithms/``,
+each once (a new algorithm module not added to the list would never reach the toolbox)."""
+import ast
+from pathlib import Path
+
+ALGORITHMS_DIR = Path(__file__).resolve().parents[2] / "processing_provider" / "algorithms"
+
+
+def _defined_algorithms() -> set[str]:
+    """Names of the classes in ``algorithms/`` with a non-empty ``NAME``, read with ast."""
+    names = set()
+    for path in ALGORITHMS_DIR.glob("*.py"):
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.ClassDef) and any(
+                    isinstance(item, ast.Assign) and item.targets[0].id == "NAME"
+                    and isinstance(item.value, ast.Constant) and item.value.value
+                    for item in node.body if isinstance(item, ast.Assign)
+                    and isinstance(item.targets[0], ast.Name)):
+                names.add(node.name)
+    return names
+
+
+def test_the_provider_lists_every_algorithm_once(qgis_app):
+    from processing_provider.provider import ALGORITHMS
+    listed = [cls.__name__ for cls in ALGORITHMS]
+    assert len(listed) == len(set(listed))
+    assert set(listed) == _defined_algorithms()
+    assert len({cls.NAME for cls in ALGORITHMS}) == len(ALGORITHMS)
