@@ -355,8 +355,10 @@ class _JunctionSearch:
     free ends and constructed connections."""
 
     def __init__(self, roads, *, min_search_radius_m, max_search_radius_m, collinear_deg,
-                 end_window_m, overshoot_m):
+                 end_window_m, overshoot_m, unsupported=None, max_unsupported_m=np.inf):
         self.n = len(roads)
+        self.unsupported = unsupported
+        self.max_unsupported_m = max_unsupported_m
         self.lines = np.asarray(roads.geometry.values, dtype=object)
         self.tree = shapely.STRtree(self.lines)
         self.coords = [shapely.get_coordinates(line) for line in self.lines]
@@ -509,7 +511,13 @@ class _JunctionSearch:
     # -- acceptance --------------------------------------------------------------------------
 
     def _push(self, heap, end, counter):
-        for candidate in self.candidates(end):
+        found = self.candidates(end)
+        if self.unsupported is not None and found:
+            xy = [c[5] for c in found]
+            off_road = self.unsupported(shapely.linestrings(
+                np.concatenate(xy), indices=np.repeat(np.arange(len(xy)), [len(v) for v in xy])))
+            found = [c for c, metres in zip(found, off_road) if metres <= self.max_unsupported_m]
+        for candidate in found:
             length, rank, key, kind, target, xy, other, is_connection = candidate
             if key not in self.seen:
                 self._record(key, kind, end // 2, target, xy, verified=False,
@@ -566,8 +574,9 @@ def find_junctions(roads: gpd.GeoDataFrame, *,
                    max_search_radius_m: float = MAX_SEARCH_RADIUS_M,
                    collinear_deg: float = COLLINEAR_DEG,
                    end_window_m: float = END_WINDOW_M,
-                   overshoot_m: float = OVERSHOOT_M) -> tuple[gpd.GeoDataFrame,
-                                                              gpd.GeoDataFrame]:
+                   overshoot_m: float = OVERSHOOT_M, unsupported=None,
+                   max_unsupported_m: float = np.inf) -> tuple[gpd.GeoDataFrame,
+                                                               gpd.GeoDataFrame]:
     """Junction connections between roads (Sec. 2.3, second paragraph).
 
     Parameters
@@ -593,6 +602,14 @@ def find_junctions(roads: gpd.GeoDataFrame, *,
     overshoot_m : float
         An end within a crossing road's half width plus this margin (metres) past it ends
         at the crossing.
+    unsupported : callable, optional
+        ``unsupported(lines) -> metres``: how much of each candidate connection (a
+        LineString array) the evidence does not show as road, e.g. the raster's
+        sub-threshold stretch (:func:`gisroads.network.rasters.raster_to_network`). Not in
+        the paper, which has no evidence left at this stage.
+    max_unsupported_m : float
+        Candidates with more than this unsupported, metres, are no connection: a false
+        blob of the raster would otherwise reach out its full search radius across a block.
 
     Returns
     -------
@@ -620,7 +637,8 @@ def find_junctions(roads: gpd.GeoDataFrame, *,
     search = _JunctionSearch(roads, min_search_radius_m=min_search_radius_m,
                              max_search_radius_m=max_search_radius_m,
                              collinear_deg=collinear_deg, end_window_m=end_window_m,
-                             overshoot_m=overshoot_m)
+                             overshoot_m=overshoot_m, unsupported=unsupported,
+                             max_unsupported_m=max_unsupported_m)
     search.crossings()
     search.run()
     edited = roads.copy()
@@ -778,6 +796,7 @@ def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
                        min_total_length_m: float = MIN_TOTAL_LENGTH_M,
                        border_m: float = BORDER_M, overshoot_m: float = OVERSHOOT_M,
                        junction_merge_m: float = JUNCTION_MERGE_M, method: str = METHOD,
+                       unsupported=None, max_unsupported_m: float = np.inf,
                        progress: Progress = None) -> tuple[RoadNetwork, gpd.GeoDataFrame]:
     """Road strings to the road-network contract (steps 1-5 of the module docstring).
 
@@ -793,6 +812,8 @@ def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
     tolerance_m : float
         See :func:`approximate_strings`.
     min_search_radius_m, max_search_radius_m, collinear_deg, end_window_m, overshoot_m : float
+        See :func:`find_junctions`.
+    unsupported, max_unsupported_m : callable, float
         See :func:`find_junctions`.
     parallel_margin_m, parallel_share, overlap_share : float
         See :func:`remove_duplicates`.
@@ -830,7 +851,8 @@ def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
     roads, connections = find_junctions(
         roads, min_search_radius_m=min_search_radius_m,
         max_search_radius_m=max_search_radius_m, collinear_deg=collinear_deg,
-        end_window_m=end_window_m, overshoot_m=overshoot_m)
+        end_window_m=end_window_m, overshoot_m=overshoot_m, unsupported=unsupported,
+        max_unsupported_m=max_unsupported_m)
     report(progress, 0.7, "checking connected components")
     roads, connections = significant_components(roads, connections,
                                                 min_total_length_m=min_total_length_m,

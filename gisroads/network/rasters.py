@@ -96,7 +96,8 @@ WEIGHT_OPTIONS = {"weight_ranges": {"width_diff_m": (0.0, 10.0)}}
 
 #: Junction search radii of roads of quality 0 and 1, metres: wider than the imagery's
 #: defaults, since a raster's road ends retreat from a cut by half the road's width.
-NETWORK_OPTIONS = {"min_search_radius_m": 15.0, "max_search_radius_m": 45.0}
+NETWORK_OPTIONS = {"min_search_radius_m": 15.0, "max_search_radius_m": 45.0,
+                   "max_unsupported_m": 20.0}
 
 _SEAM_SNAP_PX = 1.5
 
@@ -232,6 +233,26 @@ def _sample(raster: GeoRaster, lines, step_m: float):
     values[inside] = np.nan_to_num(raster.data[rows[inside], cols[inside]])
     return (np.bincount(owner, weights=values, minlength=len(lines))
             / np.maximum(np.bincount(owner, minlength=len(lines)), 1))
+
+
+def _off_road_length(raster: GeoRaster, threshold: float):
+    """``measure(lines) -> metres`` of each line where ``raster`` is below ``threshold``
+    (sampled every pixel; no data and outside count as off road)."""
+    def measure(lines):
+        length = shapely.length(lines)
+        # GEOS cannot segmentize a line of length 0; it has nothing off road either
+        points, owner = shapely.get_coordinates(
+            shapely.segmentize(np.where(length > 0, lines, None), raster.pixel_size),
+            return_index=True)
+        rows, cols = raster.xy_to_rowcol(points[:, 0], points[:, 1])
+        inside = ((rows >= 0) & (rows < raster.shape[0]) & (cols >= 0)
+                  & (cols < raster.shape[1]))
+        on_road = np.zeros(len(points), dtype=bool)
+        on_road[inside] = np.nan_to_num(raster.data[rows[inside], cols[inside]]) >= threshold
+        off_share = 1.0 - (np.bincount(owner, weights=on_road, minlength=len(lines))
+                           / np.maximum(np.bincount(owner, minlength=len(lines)), 1))
+        return off_share * length
+    return measure
 
 
 def _stitch_seams(lines, seams, tolerance_m: float):
@@ -567,8 +588,11 @@ def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = TH
     gaps, strings = link_gaps(parts, probability, gap_options=gap_options,
                               weight_options=weight_options)
     strings, blobs = drop_blobs(strings)
+    low = (part_options or {}).get("low_threshold")
     network, _ = strings_to_network(strings, extent=probability.bounds, crs=probability.crs,
                                     method=method, progress=scaled(progress, 0.7, 1.0),
+                                    unsupported=_off_road_length(
+                                        probability, threshold if low is None else low),
                                     **{**NETWORK_OPTIONS, **(network_options or {})})
     _clip_to_extent(network, shapely.box(*probability.bounds))
     network.qa["gap_edges"] = gaps

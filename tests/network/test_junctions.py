@@ -231,6 +231,20 @@ def test_search_radius_grows_with_quality():
         assert len(verified(connections)) == int(joined)
 
 
+def test_connections_the_evidence_does_not_show_are_refused():
+    main, side = LineString([(-50, 0), (50, 0)]), LineString([(0, -50), (0, -20)])
+    roads = approximate_strings(strings([main, side], quality=[1.0, 0.8]))
+    # the evidence shows road only north of y = -12: the 20 m connection has 8 m unseen
+    seen = shapely.box(-100, -12, 100, 100)
+
+    def unsupported(lines):
+        return shapely.length(lines) - shapely.length(shapely.intersection(lines, seen))
+    for max_unsupported_m, joined in ((10.0, True), (5.0, False)):
+        _, connections = find_junctions(roads, unsupported=unsupported,
+                                        max_unsupported_m=max_unsupported_m)
+        assert len(verified(connections)) == int(joined)
+
+
 def test_road_interrupted_at_a_t_junction_is_closed_and_the_side_road_meets_it():
     west, east = LineString([(-50, 0), (-8, 0)]), LineString([(8, 0), (50, 0)])
     side = LineString([(0, -50), (0, -7)])

@@ -81,6 +81,20 @@ def test_a_cut_road_is_bridged_and_parallel_roads_are_not_joined():
         shapely.Point(_xy(raster, 150, 300))).min() > 30
 
 
+def test_a_false_blob_is_not_joined_across_a_block():
+    mask = np.zeros((300, 400), np.uint8)
+    mask[60:76, :] = 1                         # a road, 8 m wide
+    rows, cols = np.mgrid[:300, :400]
+    # a false blob 40 m long and 8 m wide pointing at the road, 30 m off it
+    mask[(((rows - 176) / 40.0) ** 2 + ((cols - 200) / 8.0) ** 2) <= 1] = 1
+    raster = _raster(mask)
+    network = raster_to_network(raster)
+    assert len(network.junctions) == 0
+    assert network.centrelines.distance(shapely.Point(_xy(raster, 110, 200))).min() > 5
+    joined = raster_to_network(raster, network_options={"max_unsupported_m": np.inf})
+    assert len(joined.junctions) == 1          # what the unsupported length prevents
+
+
 def test_probability_scales_and_no_data():
     mask = _crossing()
     as_255 = road_probability(_raster(mask * 255))
