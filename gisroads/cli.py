@@ -202,18 +202,14 @@ def _then_compare(args, result: dict) -> dict:
 def cmd_lidar(args) -> int:
     from .jobs import lidar_job
     from .parallel import default_workers
-    options = dict(cue=args.cue, cell_m=args.cell, tile_m=args.tile, overlap_m=args.overlap,
-                   n_segments=args.segments, threshold=args.threshold,
-                   workers=args.workers or default_workers(), scheduler=args.scheduler,
-                   work_dir=args.work_dir)
-    if args.widths:
-        options["widths_m"] = args.widths
-    if args.lengths:
-        options["lengths_m"] = args.lengths
     source = args.input[0] if len(args.input) == 1 else args.input
-    result = lidar_job(source, args.out, tagged_las=args.tagged_las,
+    result = lidar_job(source, args.out, cue=args.cue, cell_m=args.cell, tile_m=args.tile,
+                       overlap_m=args.overlap, widths_m=args.widths, lengths_m=args.lengths,
+                       n_segments=args.segments, threshold=args.threshold,
+                       workers=args.workers or default_workers(), scheduler=args.scheduler,
+                       work_dir=args.work_dir, tagged_las=args.tagged_las,
                        rasters_dir=args.rasters, quicklook=args.quicklook,
-                       progress=_ProgressBar(not args.json), **options)
+                       progress=_ProgressBar(not args.json))
     _print(_then_compare(args, result), args.json)
     return 0
 
@@ -233,10 +229,8 @@ def cmd_image(args) -> int:
     result = image_job(args.input, args.out, nir_band=args.nir_band, red_band=args.red_band,
                        dsm_path=args.dsm, pixel_m=args.pixel, crs=args.crs,
                        quicklook=args.quicklook, model=args.model,
-                       probability_path=args.probability,
-                       **({"method": args.method} if args.method else {}),
-                       progress=_ProgressBar(not args.json),
-                       **({"n_segments": args.segments} if args.segments else {}))
+                       probability_path=args.probability, method=args.method,
+                       n_segments=args.segments, progress=_ProgressBar(not args.json))
     _print(_then_compare(args, result), args.json)
     return 0
 
@@ -315,6 +309,7 @@ def add_database_options(p) -> None:
 
 def add_update_parser(add) -> None:
     """The ``update`` subcommand (``add`` as in :func:`build_parser`)."""
+    from .jobs import update_job
     p = add("update", cmd_update, "compare extracted roads with a road database",
             "Match extracted road centre lines to the lines of a road database and write "
             "the changes to a GeoPackage in the database's CRS: confirmed (database roads "
@@ -334,16 +329,32 @@ def add_update_parser(add) -> None:
                                       "OGR feature ids)")
     p.add_argument("--width-field", help="the database's road width field, metres "
                                          "(default: widths measured, not compared)")
-    p.add_argument("--tolerance", type=_positive, default=3.0,
-                   help="offset above which a road has moved, metres (default 3)")
-    p.add_argument("--search", type=_positive, default=15.0,
-                   help="largest offset still matched as the same road, metres (default 15)")
+    p.add_argument("--tolerance", type=_positive, default=_default(update_job, "tolerance_m"),
+                   help="offset above which a road has moved, metres (default %(default)g)")
+    p.add_argument("--search", type=_positive, default=_default(update_job, "search_m"),
+                   help="largest offset still matched as the same road, metres (default "
+                        "%(default)g)")
     p.add_argument("--coverage", type=Path,
                    help="where the data could show a road: polygons, or a raster with "
                         "non-zero observable cells (data footprint minus occlusion)")
 
 
+def _default(job, parameter: str):
+    """A job's default for ``parameter``: the one its stage defines (see
+    :func:`gisroads.jobs.stage_default`), so argparse, QGIS and the docs show the same."""
+    from .jobs import stage_default
+    return stage_default(job, parameter)
+
+
+def _listed(metres) -> str:
+    """``6,9,12``: metres as the comma-separated list the options take."""
+    return ",".join(f"{m:g}" for m in metres)
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from .jobs import (blocks_job, evaluate_job, lidar_job, snakes_job, synth_job, train_job,
+                       vectorize_job)
+    from .lidar.pipeline import CUES
     parser = argparse.ArgumentParser(
         prog="gisroads", epilog=EPILOG,
         description="Road networks from airborne LiDAR and aerial imagery, as GIS layers.")
@@ -375,13 +386,15 @@ def build_parser() -> argparse.ArgumentParser:
             "road polygons, junctions, scene objects), cloud.laz (airborne point cloud) and "
             "image.tif + dsm.tif (R,G,B,NIR orthoimage and surface model).")
     p.add_argument("-o", "--out", type=Path, required=True, help="output folder")
-    p.add_argument("--size", type=_size, default=(400.0, 400.0), metavar="WxH",
-                   help="scene size in metres, e.g. 400x300 (default 400x400)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--density", type=_positive, default=10.0,
-                   help="point density in points per m² (default 10)")
-    p.add_argument("--pixel", type=_positive, default=0.25,
-                   help="image pixel size in metres (default 0.25)")
+    size = _default(synth_job, "size_m")
+    p.add_argument("--size", type=_size, default=size, metavar="WxH",
+                   help=f"scene size in metres, e.g. 400x300 (default {size[0]:g}x{size[1]:g})")
+    p.add_argument("--seed", type=int, default=_default(synth_job, "seed"),
+                   help="random seed (default %(default)s)")
+    p.add_argument("--density", type=_positive, default=_default(synth_job, "density_per_m2"),
+                   help="point density in points per m² (default %(default)g)")
+    p.add_argument("--pixel", type=_positive, default=_default(synth_job, "pixel_m"),
+                   help="image pixel size in metres (default %(default)g)")
     p.add_argument("--no-cloud", action="store_true", help="skip the point cloud")
     p.add_argument("--no-image", action="store_true", help="skip the image and DSM")
 
@@ -394,12 +407,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("extracted", type=Path,
                    help="extracted centre lines (GeoPackage: layer road_centrelines)")
     p.add_argument("reference", type=Path, help="reference centre lines (any line file)")
-    p.add_argument("--buffer", type=_positive, default=3.0,
-                   help="buffer width in metres, about half a carriageway (default 3)")
-    p.add_argument("--cell", type=_positive, default=0.5,
-                   help="grid cell for the area metrics in metres (default 0.5)")
-    p.add_argument("--junction-radius", type=_positive, default=10.0,
-                   help="distance within which junctions match, metres (default 10)")
+    p.add_argument("--buffer", type=_positive, default=_default(evaluate_job, "buffer_m"),
+                   help="buffer width in metres, about half a carriageway (default "
+                        "%(default)g)")
+    p.add_argument("--cell", type=_positive, default=_default(evaluate_job, "cell_m"),
+                   help="grid cell for the area metrics in metres (default %(default)g)")
+    p.add_argument("--junction-radius", type=_positive,
+                   default=_default(evaluate_job, "junction_radius_m"),
+                   help="distance within which junctions match, metres (default "
+                        "%(default)g)")
     p.add_argument("--extracted-polygons", type=Path,
                    help="road area of the extraction (default: its road_polygons layer)")
     p.add_argument("--reference-polygons", type=Path,
@@ -430,26 +446,29 @@ def build_parser() -> argparse.ArgumentParser:
                    help="keep the points bucketed by tile and the finished tiles here: a "
                         "stopped run started again resumes where it was (default: a "
                         "temporary folder, removed at the end)")
-    p.add_argument("--cue", choices=("intensity", "evidence"), default="intensity",
+    p.add_argument("--cue", choices=CUES, default=_default(lidar_job, "cue"),
                    help="intensity: the paper's rectangles on the ground intensity "
                         "(default); evidence: the road likelihood of every cue the cloud "
                         "carries (intensity, height above the terrain, density, roughness, "
                         "slope, returns, classification) through the network stage")
-    p.add_argument("--threshold", type=float, default=0.8,
+    p.add_argument("--threshold", type=float, default=_default(lidar_job, "threshold"),
                    help="with --cue evidence: road likelihood at which a cell is road "
-                        "(0-1, default 0.8)")
+                        "(0-1, default %(default)g)")
     p.add_argument("--cell", type=_positive,
                    help="intensity image cell in metres (default: 0.5, or the mean point "
                         "spacing of a sparser cloud)")
-    p.add_argument("--widths", type=_metres,
-                   help="road widths to try, metres, e.g. 6,9,12,16,20,25 (the default)")
-    p.add_argument("--lengths", type=_metres,
-                   help="rectangle lengths to try, metres (default 40,80,150,300)")
-    p.add_argument("--tile", type=_positive, default=300.0, help="tile side, metres (300)")
-    p.add_argument("--overlap", type=float, default=100.0,
-                   help="overlap with each neighbouring tile, metres (100)")
-    p.add_argument("--segments", type=int, default=150,
-                   help="number of NCut segments per tile image (default 150)")
+    p.add_argument("--widths", type=_metres, default=_default(lidar_job, "widths_m"),
+                   help="road widths to try, metres (default "
+                        f"{_listed(_default(lidar_job, 'widths_m'))})")
+    p.add_argument("--lengths", type=_metres, default=_default(lidar_job, "lengths_m"),
+                   help="rectangle lengths to try, metres (default "
+                        f"{_listed(_default(lidar_job, 'lengths_m'))})")
+    p.add_argument("--tile", type=_positive, default=_default(lidar_job, "tile_m"),
+                   help="tile side, metres (%(default)g)")
+    p.add_argument("--overlap", type=float, default=_default(lidar_job, "overlap_m"),
+                   help="overlap with each neighbouring tile, metres (%(default)g)")
+    p.add_argument("--segments", type=int, default=_default(lidar_job, "n_segments"),
+                   help="number of NCut segments per tile image (default %(default)s)")
     p.add_argument("--tagged-las", type=Path,
                    help="also write the cloud with road points classified 11")
     p.add_argument("--rasters", type=Path,
@@ -472,10 +491,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: a regular sample of the raster)")
     p.add_argument("--blocks", type=int,
                    help="number of normalized-cut segments (default: the largest eigengap)")
-    p.add_argument("--spacing", type=_positive, default=10.0,
-                   help="node spacing in metres (default 10)")
-    p.add_argument("--max-edge", type=_positive, default=80.0,
-                   help="longest graph edge in metres (default 80, as in the paper)")
+    p.add_argument("--spacing", type=_positive, default=_default(blocks_job, "sample_spacing_m"),
+                   help="node spacing in metres (default %(default)g)")
+    p.add_argument("--max-edge", type=_positive, default=_default(blocks_job, "max_edge_m"),
+                   help="longest graph edge in metres (default %(default)g, as in the paper)")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the blocks")
 
     p = add("image", cmd_image, "extract roads from an aerial image (learned cue; "
@@ -532,15 +551,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--out", type=Path, required=True, help="output model (.npz)")
     p.add_argument("--width-field", help="field of the road layer holding each road's width "
                                          "in metres (empty values take --width)")
-    p.add_argument("--width", type=_positive, default=6.0,
+    p.add_argument("--width", type=_positive, default=_default(train_job, "width_m"),
                    help="road width in metres where no width field or value is given "
-                        "(default 6)")
-    p.add_argument("--samples", type=int, default=100_000,
-                   help="pixels sampled from the image, half of them road (default 100000)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--guard", type=float, default=5.0,
+                        "(default %(default)g)")
+    p.add_argument("--samples", type=int, default=_default(train_job, "samples"),
+                   help="pixels sampled from the image, half of them road (default "
+                        "%(default)s)")
+    p.add_argument("--seed", type=int, default=_default(train_job, "seed"),
+                   help="random seed (default %(default)s)")
+    p.add_argument("--guard", type=float, default=_default(train_job, "guard_m"),
                    help="guard band beyond the road edge, metres, with no non-road sample "
-                        "(default 5: OpenStreetMap lines are often 2-5 m off)")
+                        "(default %(default)g: OpenStreetMap lines are often 2-5 m off)")
     p.add_argument("--pixel", type=_positive,
                    help="pixel size in metres, for an image without georeferencing")
     p.add_argument("--crs", help="projected CRS for an image without georeferencing, "
@@ -556,10 +577,11 @@ def build_parser() -> argparse.ArgumentParser:
             "raster), road polygons, junctions and the QA layers gap_edges, "
             "junction_connections and rejected to a GeoPackage in the raster's CRS.")
     add_source_and_out(p, "input", "road raster: GeoTIFF (or PNG with --pixel and --crs)")
-    p.add_argument("--threshold", type=float, default=0.5,
+    p.add_argument("--threshold", type=float, default=_default(vectorize_job, "threshold"),
                    help="road probability threshold, 0-1 (a 0-255 raster is scaled to 0-1 "
-                        "first; default 0.5)")
-    p.add_argument("--band", type=int, default=1, help="1-based band to read (default 1)")
+                        "first; default %(default)g)")
+    p.add_argument("--band", type=int, default=_default(vectorize_job, "band"),
+                   help="1-based band to read (default %(default)s)")
     p.add_argument("--pixel", type=_positive,
                    help="pixel size in metres, for a raster without georeferencing")
     p.add_argument("--crs", help="projected CRS for a raster without georeferencing, "
@@ -576,7 +598,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_source_and_out(p, "input", "LAS/LAZ point cloud")
     p.add_argument("map", type=Path, help="road map lines (GeoPackage, GeoJSON, any OGR "
                                           "line layer, any CRS)")
-    p.add_argument("--curb-detector", choices=("exp", "step", "none"), default="exp",
+    p.add_argument("--curb-detector", choices=("exp", "step", "none"),
+                   default=_default(snakes_job, "curb_detector"),
                    help="height weighting of the curb detector: exp (Gaussian, 15 cm mean, "
                         "5 cm deviation; default), step (10-20 cm) or none")
     p.add_argument("--tagged-las", type=Path,

@@ -6,6 +6,7 @@ from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutpu
                        QgsProcessingParameterRasterLayer, QgsWkbTypes)
 
 from gisroads.io.raster import read_raster
+from gisroads.jobs import stage_default
 from gisroads.update import CHANGES, conflate
 
 from ..convert import (frame_to_sink, gisroads_errors, progress_callback, source_to_frame,
@@ -82,14 +83,17 @@ class CompareWithRoadDatabase(GisroadsAlgorithm):
                                          optional=True),
              "field holding road widths in metres; empty: widths are measured, not compared"),
             (QgsProcessingParameterNumber("TOLERANCE", self.tr("Moved tolerance (metres)"),
-                                          double, 3.0, minValue=0.1),
+                                          double, stage_default(conflate, "tolerance_m"),
+                                          minValue=0.1),
              "a road whose median offset from the extraction exceeds this has moved"),
             (QgsProcessingParameterNumber("SEARCH", self.tr("Search distance (metres)"),
-                                          double, 15.0, minValue=0.5),
+                                          double, stage_default(conflate, "search_m"),
+                                          minValue=0.5),
              "largest offset at which a database road and an extracted line can still be "
              "the same road: the largest displacement reported as moved"),
             (QgsProcessingParameterNumber("WIDTH_TOLERANCE",
-                                          self.tr("Width tolerance (metres)"), double, 2.0,
+                                          self.tr("Width tolerance (metres)"), double,
+                                          stage_default(conflate, "width_tolerance_m"),
                                           minValue=0.0),
              "a measured width differing from the database's by more than this is a change"),
             (QgsProcessingParameterFeatureSource("COVERAGE",

@@ -2,7 +2,8 @@
 from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination)
 
-from gisroads.jobs import attractor_job
+from gisroads.jobs import attractor_job, stage_default
+from gisroads.snakes.registration import SNAP_M
 
 from ..convert import gisroads_errors, progress_callback, source_to_frame
 from .base import GisroadsAlgorithm, cloud_input, road_map_input
@@ -22,10 +23,11 @@ def map_guided_parameters(tr, cell_help: str) -> list:
                                     defaultValue=0),
          "how the height step of a neighbourhood weights its normal's tilt"),
         (QgsProcessingParameterNumber("CELL", tr("Attractor cell (metres)"),
-                                      QgsProcessingParameterNumber.Double, 0.5,
+                                      QgsProcessingParameterNumber.Double,
+                                      stage_default(attractor_job, "cell_m"),
                                       minValue=0.1, maxValue=5.0), cell_help),
         (QgsProcessingParameterNumber("SNAP", tr("Intersection snapping (metres)"),
-                                      QgsProcessingParameterNumber.Double, 2.0,
+                                      QgsProcessingParameterNumber.Double, SNAP_M,
                                       minValue=0.01, maxValue=50.0),
          "map line ends closer than this are one intersection"),
     ]

@@ -4,6 +4,7 @@ from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutpu
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber)
 
 from gisroads.evaluate import evaluate_network, format_report, match_layers
+from gisroads.jobs import stage_default
 from gisroads.progress import to_json
 
 from ..convert import frame_to_sink, gisroads_errors, source_to_frame, style_on_load
@@ -45,11 +46,11 @@ class EvaluateRoadNetwork(GisroadsAlgorithm):
         # layer's units, which QGIS shows as "<unknown>" until a layer is chosen
         double = QgsProcessingParameterNumber.Double
         self.addParameter(QgsProcessingParameterNumber(
-            "BUFFER", self.tr("Buffer width (metres; about half a carriageway)"), double, 3.0,
-            minValue=0.01))
+            "BUFFER", self.tr("Buffer width (metres; about half a carriageway)"), double,
+            stage_default(evaluate_network, "buffer_m"), minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
-            "JUNCTION_RADIUS", self.tr("Junction matching radius (metres)"), double, 10.0,
-            minValue=0.01))
+            "JUNCTION_RADIUS", self.tr("Junction matching radius (metres)"), double,
+            stage_default(evaluate_network, "junction_radius_m"), minValue=0.01))
         self.addParameter(QgsProcessingParameterFeatureSource(
             "EXTRACTED_POLYGONS", self.tr("Extracted road polygons (for area scores)"),
             polygons, optional=True))
@@ -58,7 +59,8 @@ class EvaluateRoadNetwork(GisroadsAlgorithm):
             polygons, optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             "CELL", self.tr("Grid cell for area scores (metres)"),
-            QgsProcessingParameterNumber.Double, 0.5, minValue=0.05))
+            QgsProcessingParameterNumber.Double, stage_default(evaluate_network, "cell_m"),
+            minValue=0.05))
         self.addParameter(QgsProcessingParameterFeatureSource(
             "VALID_AREA", self.tr("Valid area: score only inside these polygons"),
             polygons, optional=True))

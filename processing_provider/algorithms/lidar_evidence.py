@@ -3,7 +3,7 @@ paper)."""
 from qgis.core import (QgsProcessingOutputNumber, QgsProcessingOutputString,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination)
 
-from gisroads.jobs import evidence_job
+from gisroads.jobs import evidence_job, stage_default
 
 from ..convert import gisroads_errors, progress_callback
 from .base import GisroadsAlgorithm, cloud_input
@@ -37,10 +37,11 @@ class LidarRoadEvidence(GisroadsAlgorithm):
                                           optional=True, minValue=0.1, maxValue=5.0),
              "empty: 0.5 m, or the mean point spacing of a sparser cloud"),
             (QgsProcessingParameterNumber("TILE", self.tr("Tile side (metres)"), double,
-                                          300.0, minValue=50.0),
+                                          stage_default(evidence_job, "tile_m"), minValue=50.0),
              "the cloud is read and measured tile by tile, normalised alike"),
             (QgsProcessingParameterNumber("OVERLAP", self.tr("Tile overlap (metres)"), double,
-                                          100.0, minValue=0.0),
+                                          stage_default(evidence_job, "overlap_m"),
+                                          minValue=0.0),
              "overlap with each neighbouring tile; each cell comes from one tile's core"),
             (QgsProcessingParameterRasterDestination("OUTPUT", self.tr("Road evidence")),
              "GeoTIFF of road likelihood, 0-1"),

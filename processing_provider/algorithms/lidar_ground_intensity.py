@@ -2,7 +2,7 @@
 from qgis.core import (QgsProcessingOutputNumber, QgsProcessingOutputRasterLayer,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination)
 
-from gisroads.jobs import ground_intensity_job
+from gisroads.jobs import ground_intensity_job, stage_default
 
 from ..convert import gisroads_errors, progress_callback
 from .base import GisroadsAlgorithm, cloud_input
@@ -35,11 +35,13 @@ class LidarGroundIntensity(GisroadsAlgorithm):
                                           None, optional=True, minValue=0.1, maxValue=5.0),
              "empty: 0.5 m as in the paper, or the mean point spacing of a sparser cloud"),
             (QgsProcessingParameterNumber("T_PLANAR", self.tr("Planarity threshold T_planar"),
-                                          double, 0.01, minValue=0.0001, maxValue=0.3),
+                                          double, stage_default(ground_intensity_job, "t_planar"),
+                                          minValue=0.0001, maxValue=0.3),
              "a cluster is planar when its smallest eigenvalue over the eigenvalue sum is "
              "below this (paper: 0.01)"),
             (QgsProcessingParameterNumber("T_VERT", self.tr("Horizontality threshold T_vert"),
-                                          double, 0.98, minValue=0.5, maxValue=1.0),
+                                          double, stage_default(ground_intensity_job, "t_vert"),
+                                          minValue=0.5, maxValue=1.0),
              "a planar cluster is horizontal when |n . z| exceeds this (paper: 0.98)"),
             (QgsProcessingParameterRasterDestination("OUTPUT", self.tr("Intensity image")),
              "GeoTIFF, one band per ground level; the level index goes beside it"),

@@ -4,7 +4,7 @@ from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterFileDes
                        QgsProcessingParameterString)
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
-from gisroads.jobs import lidar_job, parse_metres
+from gisroads.jobs import lidar_job, parse_metres, stage_default
 from gisroads.lidar.pipeline import CUES, DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, EVIDENCE_THRESHOLD
 
 from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
@@ -56,13 +56,14 @@ class LidarRoadNetwork(GisroadsAlgorithm):
             (QgsProcessingParameterString("LENGTHS", self.tr("Rectangle lengths (metres)"),
                                           lengths), "comma-separated (paper: 40-300 m)"),
             (QgsProcessingParameterNumber("TILE", self.tr("Tile side (metres)"), double,
-                                          300.0, minValue=50.0),
+                                          stage_default(lidar_job, "tile_m"), minValue=50.0),
              "tiles are processed one at a time (paper: 300 m)"),
             (QgsProcessingParameterNumber("OVERLAP", self.tr("Tile overlap (metres)"), double,
-                                          100.0, minValue=0.0),
+                                          stage_default(lidar_job, "overlap_m"), minValue=0.0),
              "overlap with each neighbouring tile (paper: 100 m)"),
             (QgsProcessingParameterNumber("SEGMENTS", self.tr("NCut segments per tile"),
-                                          QgsProcessingParameterNumber.Integer, 150,
+                                          QgsProcessingParameterNumber.Integer,
+                                          stage_default(lidar_job, "n_segments"),
                                           minValue=10, maxValue=1000),
              "over-segmentation size (paper: 100-200)"),
             (network_output(self.tr, "GeoPackage receiving every layer, in the cloud's CRS"), None),

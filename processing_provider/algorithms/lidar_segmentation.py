@@ -3,7 +3,7 @@ from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination,
                        QgsProcessingParameterRasterLayer)
 
-from gisroads.jobs import lidar_segmentation_job
+from gisroads.jobs import lidar_segmentation_job, stage_default
 
 from ..convert import gisroads_errors
 from .base import GisroadsAlgorithm
@@ -39,7 +39,8 @@ class LidarSegmentation(GisroadsAlgorithm):
             (QgsProcessingParameterRasterLayer("INPUT", self.tr("Intensity image")),
              "the intensity GeoTIFF of Ground planes and intensity image"),
             (QgsProcessingParameterNumber("SEGMENTS", self.tr("Number of segments"),
-                                          QgsProcessingParameterNumber.Integer, 150,
+                                          QgsProcessingParameterNumber.Integer,
+                                          stage_default(lidar_segmentation_job, "n_segments"),
                                           minValue=10, maxValue=1000),
              "over-segmentation size (paper: 100-200)"),
             (QgsProcessingParameterRasterDestination("OUTPUT", self.tr("Segments")),

@@ -2,7 +2,7 @@
 from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber)
 
-from gisroads.jobs import register_job
+from gisroads.jobs import register_job, stage_default
 
 from ..convert import (gisroads_errors, load_geopackage_on_completion, progress_callback,
                        source_to_frame)
@@ -39,20 +39,25 @@ class RegisterRoadMap(GisroadsAlgorithm):
                                   "only along the map"), None),
             (road_map_input(self.tr), None),
             (QgsProcessingParameterNumber("SNAP", self.tr("Intersection snapping (metres)"),
-                                          double, 2.0, minValue=0.01, maxValue=50.0),
+                                          double, stage_default(register_job, "snap_m"),
+                                          minValue=0.01, maxValue=50.0),
              "line ends closer than this are one intersection; an end this close to "
              "another line makes a T junction"),
             (QgsProcessingParameterNumber("CONTROL_SPACING",
                                           self.tr("Control vertex spacing (metres)"),
-                                          double, 15.0, minValue=1.0, maxValue=200.0),
+                                          double,
+                                          stage_default(register_job, "control_spacing_m"),
+                                          minValue=1.0, maxValue=200.0),
              "spline control vertices along the roads (paper: 15 m)"),
             (QgsProcessingParameterNumber("SUPPORT_RADIUS",
                                           self.tr("Support radius (metres)"),
-                                          double, 0.15, minValue=0.01, maxValue=5.0),
+                                          double, stage_default(register_job, "support_radius_m"),
+                                          minValue=0.01, maxValue=5.0),
              "points within this distance of a sample fit its elevation (paper: 15 cm); "
              "an airborne cloud of a few points per square metre sees one sample in two"),
             (QgsProcessingParameterNumber("MAX_INCLINE", self.tr("Maximum incline"),
-                                          double, 0.35, minValue=0.01, maxValue=2.0),
+                                          double, stage_default(register_job, "max_incline"),
+                                          minValue=0.01, maxValue=2.0),
              "steepest road, rise over run (paper: 0.35)"),
             (QgsProcessingParameterFileDestination("OUTPUT", self.tr("Registered map"),
                                                    "GeoPackage (*.gpkg)"),

@@ -5,7 +5,7 @@ from qgis.core import (QgsProcessingOutputFile, QgsProcessingOutputRasterLayer,
                        QgsProcessingContext)
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
-from gisroads.jobs import synth_job
+from gisroads.jobs import stage_default, synth_job
 
 from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
 from .base import GisroadsAlgorithm
@@ -29,17 +29,20 @@ class SyntheticRoadScene(GisroadsAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         double = QgsProcessingParameterNumber.Double
+        size = stage_default(synth_job, "size_m")
         params = [
             QgsProcessingParameterNumber("WIDTH", self.tr("Scene width (metres)"), double,
-                                         400.0, minValue=300.0, maxValue=5000.0),
+                                         size[0], minValue=300.0, maxValue=5000.0),
             QgsProcessingParameterNumber("HEIGHT", self.tr("Scene height (metres)"), double,
-                                         400.0, minValue=300.0, maxValue=5000.0),
+                                         size[1], minValue=300.0, maxValue=5000.0),
             QgsProcessingParameterNumber("SEED", self.tr("Random seed"),
                                          QgsProcessingParameterNumber.Integer, 0, minValue=0),
             QgsProcessingParameterNumber("DENSITY", self.tr("Point density (points/m²)"),
-                                         double, 10.0, minValue=0.1, maxValue=200.0),
+                                         double, stage_default(synth_job, "density_per_m2"),
+                                         minValue=0.1, maxValue=200.0),
             QgsProcessingParameterNumber("PIXEL", self.tr("Image pixel size (metres)"),
-                                         double, 0.25, minValue=0.05, maxValue=5.0),
+                                         double, stage_default(synth_job, "pixel_m"),
+                                         minValue=0.05, maxValue=5.0),
             QgsProcessingParameterBoolean("WRITE_CLOUD", self.tr("Write the point cloud"), True),
             QgsProcessingParameterBoolean("WRITE_IMAGE", self.tr("Write the image and DSM"),
                                           True),

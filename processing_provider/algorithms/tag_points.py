@@ -2,7 +2,7 @@
 from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFile,
                        QgsProcessingParameterFileDestination, QgsProcessingParameterNumber)
 
-from gisroads.jobs import tag_job
+from gisroads.jobs import stage_default, tag_job
 
 from ..convert import gisroads_errors
 from .base import GisroadsAlgorithm, cloud_input
@@ -37,7 +37,8 @@ class TagRoadPoints(GisroadsAlgorithm):
              "optional: ground_heights.tif from the LiDAR road network's raster folder (or "
              "Ground planes and intensity image); empty: computed from the cloud"),
             (QgsProcessingParameterNumber("TOLERANCE", self.tr("Height tolerance (metres)"),
-                                          QgsProcessingParameterNumber.Double, 0.3,
+                                          QgsProcessingParameterNumber.Double,
+                                          stage_default(tag_job, "tolerance_m"),
                                           minValue=0.01, maxValue=5.0),
              "largest height difference between a point and its level's surface"),
             (QgsProcessingParameterFileDestination("OUTPUT", self.tr("Tagged cloud"),

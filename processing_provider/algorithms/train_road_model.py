@@ -4,7 +4,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterLayer)
 
-from gisroads.jobs import train_job
+from gisroads.jobs import stage_default, train_job
 
 from ..convert import gisroads_errors, progress_callback, source_to_frame
 from .base import GisroadsAlgorithm
@@ -46,16 +46,19 @@ class TrainRoadModel(GisroadsAlgorithm):
              "field holding each road's width in metres; empty fields, non-positive values "
              "and no field take the road width below"),
             (QgsProcessingParameterNumber("WIDTH", self.tr("Road width (metres)"),
-                                          QgsProcessingParameterNumber.Double, 6.0,
+                                          QgsProcessingParameterNumber.Double,
+                                          stage_default(train_job, "width_m"),
                                           minValue=0.5, maxValue=100.0),
              "width of the roads without a width field value"),
             (QgsProcessingParameterNumber("GUARD", self.tr("Guard band (metres)"),
-                                          QgsProcessingParameterNumber.Double, 5.0,
+                                          QgsProcessingParameterNumber.Double,
+                                          stage_default(train_job, "guard_m"),
                                           minValue=0.0, maxValue=50.0),
              "no non-road sample within this distance of a road's edge: OpenStreetMap lines "
              "are often 2-5 m off the road"),
             (QgsProcessingParameterNumber("SAMPLES", self.tr("Samples"),
-                                          QgsProcessingParameterNumber.Integer, 100000,
+                                          QgsProcessingParameterNumber.Integer,
+                                          stage_default(train_job, "samples"),
                                           minValue=1000),
              "pixels sampled from the image, half of them road; more samples, slower "
              "training"),
