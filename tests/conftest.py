@@ -20,3 +20,44 @@ def lidar_dir() -> Path:
     if not LIDAR.is_dir():
         pytest.fail(f"real sample data missing: {LIDAR} (../shared must sit beside the repo)")
     return LIDAR
+
+
+@pytest.fixture(scope="session")
+def dask_loopback(tmp_path_factory):
+    """The address of a real ``dask-scheduler`` and one single-threaded ``dask-worker``
+    started here on loopback, shared by the tests that run a job on a scheduler."""
+    import socket
+    import subprocess
+    import sys
+
+    pytest.importorskip("distributed")
+    from distributed import Client
+
+    from tests.lidar.tile_runs import ENV
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    processes = [subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+         "--port", str(port), "--no-dashboard"], env=ENV, stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL)]
+    try:
+        processes.append(subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nworkers", "1",
+             "--nthreads", "1", "--no-dashboard", "--local-directory",
+             str(tmp_path_factory.mktemp("dask-worker"))],
+            env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        with Client(address, timeout=60) as client:  # wait for the worker to join
+            client.wait_for_workers(1, timeout=120)
+        yield address
+    finally:
+        for process in reversed(processes):
+            if process.poll() is None:
+                process.terminate()
+                try:
+                    process.wait(timeout=20)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+                    process.wait()

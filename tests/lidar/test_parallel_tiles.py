@@ -1,9 +1,7 @@
 """Tiles as tasks on Dask (issue 12, item 2): the same network whatever the number of
 workers, on a local cluster or on a real scheduler and worker started here on loopback."""
 import json
-import socket
 import subprocess
-import sys
 import time
 
 import numpy as np
@@ -53,48 +51,14 @@ def test_two_workers_give_the_network_of_one(tiled_cloud, tiled_network):
     np.testing.assert_array_equal(one.evidence.data, two.evidence.data)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _stop(process):
-    if process.poll() is None:
-        process.terminate()
-        try:
-            process.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-
-
-def test_cli_on_a_real_scheduler_and_worker_on_loopback(tiled_cloud, tiled_network, tmp_path):
-    port = _free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    scheduler = subprocess.Popen(
-        [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
-         "--port", str(port), "--no-dashboard"], env=ENV, stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL)
-    worker = None
-    try:
-        worker = subprocess.Popen(
-            [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nworkers", "1",
-             "--nthreads", "1", "--no-dashboard", "--local-directory", str(tmp_path / "dw")],
-            env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        from distributed import Client
-        with Client(address, timeout=60) as client:  # wait for the worker to join
-            client.wait_for_workers(1, timeout=120)
-        out = tmp_path / "roads.gpkg"
-        done = subprocess.run([*GISROADS, "lidar", str(tiled_cloud), "-o", str(out), "--json",
-                               "--scheduler", address, "--work-dir", str(tmp_path / "work")],
-                              capture_output=True, text=True, env=ENV, timeout=600)
-        assert done.returncode == 0, done.stderr[-3000:]
-        result = json.loads(done.stdout)
-        assert result["tiles_run"] == 6 and result["tiles_reused"] == 0
-        assert_same_geometries(read_layer(out, "road_centrelines"),
-                         tiled_network.network.centrelines.reset_index(drop=True))
-    finally:
-        for process in (worker, scheduler):
-            if process is not None:
-                _stop(process)
+def test_cli_on_a_real_scheduler_and_worker_on_loopback(tiled_cloud, tiled_network, tmp_path,
+                                                         dask_loopback):
+    out = tmp_path / "roads.gpkg"
+    done = subprocess.run([*GISROADS, "lidar", str(tiled_cloud), "-o", str(out), "--json",
+                           "--scheduler", dask_loopback, "--work-dir", str(tmp_path / "work")],
+                          capture_output=True, text=True, env=ENV, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    result = json.loads(done.stdout)
+    assert result["tiles_run"] == 6 and result["tiles_reused"] == 0
+    assert_same_geometries(read_layer(out, "road_centrelines"),
+                           tiled_network.network.centrelines.reset_index(drop=True))
