@@ -52,7 +52,24 @@ def progress_message(done: int, total: int, started: float, what: str = "tiles")
 
 def run_tasks(func: Callable, items: Sequence, *, workers: int = 1, scheduler: str | None = None,
               progress: Progress = None, what: str = "tiles") -> list:
-    """``[func(item) for item in items]``, here or on Dask (module docstring).
+    """``[func(item) for item in items]``, here or on Dask (module docstring); the
+    parameters are those of :func:`for_each_result`."""
+    results = [None] * len(items)
+
+    def keep(i, result):
+        results[i] = result
+    for_each_result(func, items, keep, workers=workers, scheduler=scheduler,
+                    progress=progress, what=what)
+    return results
+
+
+def for_each_result(func: Callable, items: Sequence, on_result: Callable, *, workers: int = 1,
+                    scheduler: str | None = None, progress: Progress = None,
+                    what: str = "tiles") -> None:
+    """Call ``on_result(i, func(items[i]))`` for every item as soon as its result is here,
+    in the order the tasks finish, and keep nothing: the caller keeps what it needs of each
+    result (placed by ``i``, so that its output does not depend on the order), and a task's
+    result is released on the worker and here as soon as it was handed over.
 
     Parameters
     ----------
@@ -60,6 +77,8 @@ def run_tasks(func: Callable, items: Sequence, *, workers: int = 1, scheduler: s
         Picklable (a module-level function or a ``functools.partial`` of one) when run on
         Dask; it is called with its BLAS threads pinned to one.
     items : sequence
+    on_result : callable
+        ``on_result(index of the item, result)``.
     workers : int
         Worker processes of a local cluster; 1 (with no scheduler) runs in this process.
     scheduler : str, optional
@@ -73,12 +92,11 @@ def run_tasks(func: Callable, items: Sequence, *, workers: int = 1, scheduler: s
         raise ValueError(f"workers must be at least 1, got {workers}")
     started = time.monotonic()
     if scheduler is None and (workers == 1 or len(items) <= 1):
-        results = []
         for i, item in enumerate(items):
-            results.append(single_threaded(func, item))
+            on_result(i, single_threaded(func, item))
             report(progress, (i + 1) / len(items), progress_message(i + 1, len(items),
                                                                     started, what))
-        return results
+        return
     try:
         from distributed import Client, LocalCluster, as_completed
     except ImportError:
@@ -108,20 +126,21 @@ def run_tasks(func: Callable, items: Sequence, *, workers: int = 1, scheduler: s
         for i, item in enumerate(items):
             future = client.submit(single_threaded, func, item, pure=False)
             live[future.key] = (i, future)
-        results = [None] * len(items)
         done = 0
         try:
             for future in as_completed([f for _, f in live.values()]):
                 i, _ = live.pop(future.key)
-                results[i] = future.result()
+                result = future.result()
                 future.release()  # the worker may forget it: memory of one task per worker
+                del future
+                on_result(i, result)
+                del result  # the caller kept what it needs
                 done += 1
                 report(progress, done / len(items), progress_message(done, len(items),
                                                                      started, what))
         except BaseException:
             client.cancel([f for _, f in live.values()])
             raise
-        return results
     finally:
         client.close()
         if cluster is not None:

@@ -44,6 +44,15 @@ def test_two_workers_give_the_network_of_one(tiled_cloud, tiled_network):
     lean = extract_roads(tiled_cloud, workers=2, tile_maps=False)
     assert [len(t.likelihood) for t in lean.tiles] == [0] * 6
     assert_same_geometries(lean.network.centrelines, tiled_network.network.centrelines)
+    # ... and the driver keeps of each tile only its core: the same QA layers and mosaics
+    for name in ("rectangles", "hypotheses"):
+        assert_same_geometries(lean.network.qa[name], tiled_network.network.qa[name])
+    np.testing.assert_array_equal(lean.heights.data, tiled_network.heights.data)
+    for tile in lean.tiles:
+        for raster in (tile.intensity, tile.heights):
+            inner = np.array(tile.tile.core) + raster.pixel_size * np.array([-1, -1, 1, 1])
+            assert (inner[:2] <= raster.bounds[:2]).all() and \
+                (raster.bounds[2:] <= inner[2:]).all()  # to the nearest cell
     # the evidence cue too (its reference tile first, the others on the cluster)
     one = extract_roads(tiled_cloud, cue="evidence")
     two = extract_roads(tiled_cloud, cue="evidence", workers=2)
