@@ -254,11 +254,27 @@ def cmd_vectorize(args) -> int:
     return 0
 
 
+def add_parallel_options(p, what: str) -> None:
+    """--workers, --scheduler and --work-dir: ``what`` (tiles, road patches) as Dask tasks."""
+    p.add_argument("--workers", type=int, metavar="N",
+                   help=f"{what} in parallel on a local Dask cluster of N worker processes "
+                        "(default: one per core; 1 runs them in this process)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help=f"run the {what} on an existing Dask cluster (e.g. "
+                        "tcp://host:8786); its workers must see --work-dir")
+    p.add_argument("--work-dir", type=Path, metavar="DIR",
+                   help=f"keep the points bucketed by tile and the finished {what} here: a "
+                        "stopped run started again resumes where it was (default: a "
+                        "temporary folder, removed at the end)")
+
+
 def cmd_snakes(args) -> int:
     from .jobs import snakes_job
+    from .parallel import default_workers
     result = snakes_job(args.input, args.map, args.out, curb_detector=args.curb_detector,
                         tagged_las=args.tagged_las, attractor_tif=args.attractor,
-                        progress=_ProgressBar(not args.json))
+                        workers=args.workers or default_workers(), scheduler=args.scheduler,
+                        work_dir=args.work_dir, progress=_ProgressBar(not args.json))
     _print(_then_compare(args, result), args.json)
     return 0
 
@@ -436,16 +452,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "files, a folder of them or a quoted glob ('tiles/*.laz'): tiles of one "
                    "area in one CRS, read as one cloud")
     p.add_argument("-o", "--out", type=Path, required=True, help="output GeoPackage (.gpkg)")
-    p.add_argument("--workers", type=int, metavar="N",
-                   help="tiles in parallel on a local Dask cluster of N worker processes "
-                        "(default: one per core; 1 runs them in this process)")
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="run the tiles on an existing Dask cluster (e.g. tcp://host:8786); "
-                        "its workers must see --work-dir")
-    p.add_argument("--work-dir", type=Path, metavar="DIR",
-                   help="keep the points bucketed by tile and the finished tiles here: a "
-                        "stopped run started again resumes where it was (default: a "
-                        "temporary folder, removed at the end)")
+    add_parallel_options(p, "tiles")
     p.add_argument("--cue", choices=CUES, default=_default(lidar_job, "cue"),
                    help="intensity: the paper's rectangles on the ground intensity "
                         "(default); evidence: the road likelihood of every cue the cloud "
@@ -605,6 +612,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tagged-las", type=Path,
                    help="also write the cloud with road points classified 11")
     p.add_argument("--attractor", type=Path, help="also write the attractor map (GeoTIFF)")
+    add_parallel_options(p, "road patches")
     add_database_options(p)
 
     p = add("demo", cmd_demo, "run both road pipelines on the bundled real data",

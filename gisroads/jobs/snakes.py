@@ -39,7 +39,8 @@ def snakes_job(cloud_path, map_source, out_path, *,
                curb_detector: str = stage_default(extract_map_guided, "curb_detector"),
                cell_m: float = stage_default(extract_map_guided, "cell_m"),
                snap_m: float | None = None, clearance_m: float = CLEARANCE_M,
-               tagged_las=None, attractor_tif=None, progress: Progress = None) -> dict:
+               tagged_las=None, attractor_tif=None, workers: int = 1,
+               scheduler: str | None = None, work_dir=None, progress: Progress = None) -> dict:
     """Map-guided road extraction with ribbon snakes (Boyko & Funkhouser, 2011).
 
     ``map_source``: a line file (a GeoPackage's road_centrelines layer, else its first;
@@ -52,7 +53,9 @@ def snakes_job(cloud_path, map_source, out_path, *,
     """
     roads = extract_map_guided(cloud_path, _map_lines(map_source), curb_detector=curb_detector,
                                cell_m=cell_m, snap_m=snap_m, clearance_m=clearance_m,
-                               tagged_las=tagged_las, progress=scaled(progress, 0.0, 0.95))
+                               tagged_las=tagged_las, workers=workers, scheduler=scheduler,
+                               work_dir=work_dir, attractor=attractor_tif is not None,
+                               progress=scaled(progress, 0.0, 0.95))
     network = roads.network
     write_geopackage(out_path, network.layers())
     _warn_if_no_road(network, cloud_path)

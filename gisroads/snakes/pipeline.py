@@ -14,6 +14,7 @@ converted together, and the road polygons carry their ``level``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import geopandas as gpd
 import numpy as np
@@ -25,6 +26,7 @@ from scipy import ndimage
 from ..geo import GeoRaster, RoadNetwork
 from ..io.las import cloud_crs, write_classified
 from ..lidar.tagging import ROAD_SURFACE_CLASS
+from ..lidar.tilestore import digest
 from ..progress import Progress, report, scaled
 from ..vectorize.ribbons import ribbon_areas, ribbons_to_network
 from .attractor import ALPHA_ATTR, BETA_ATTR, LANE_M, MIN_NEIGHBOURS, attractor_map
@@ -337,6 +339,35 @@ def tag_cloud(source, target, road_indices: np.ndarray, *,
     return len(road_indices)
 
 
+def _map_in_cloud_crs(cloud_path, map_lines: gpd.GeoDataFrame):
+    """``(the map's non-empty lines in the cloud's metre CRS, that CRS or None)``."""
+    lines = map_lines[map_lines.geometry.notna() & ~map_lines.geometry.is_empty]
+    if len(lines) == 0:
+        raise ValueError("the road map holds no line")
+    working, _ = cloud_crs(cloud_path)
+    if working is not None:
+        if lines.crs is None:
+            raise ValueError("the road map has no CRS; cannot match it to the cloud")
+        lines = lines.to_crs(working)
+    return lines, working
+
+
+def _register(store, cloud_path, lines: gpd.GeoDataFrame, snap_m: float | None, *,
+              progress: Progress = None):
+    """The map registered on the points of ``store`` along its lines (Sec. 2.1)."""
+    from .registration import SNAP_M, SUPPORT_RADIUS_M, register_map
+    from .subclouds import read_corridor
+
+    snap = SNAP_M if snap_m is None else snap_m
+    report(progress, 0.0, "reading the points along the map")
+    along = shapely.get_coordinates(shapely.segmentize(lines.geometry.values, 0.5))
+    cloud, _ = read_corridor(store, along, SUPPORT_RADIUS_M + snap + 0.5)
+    if len(cloud) == 0:
+        raise ValueError(f"{cloud_path}: no point lies along the map's lines; "
+                         "does the map cover the cloud?")
+    return register_map(lines, cloud, snap_m=snap, progress=progress)
+
+
 def map_patches(cloud_path, map_lines: gpd.GeoDataFrame, *, snap_m: float | None = None,
                 progress: Progress = None):
     """Register a road map on a LAS/LAZ file and cut its road patches (Sec. 2.1-2.2).
@@ -351,32 +382,16 @@ def map_patches(cloud_path, map_lines: gpd.GeoDataFrame, *, snap_m: float | None
         Those with enough points and samples for a ribbon.
     crs : pyproj.CRS or None
     """
-    from .registration import SNAP_M, SUPPORT_RADIUS_M, register_map
     from ..lidar.tilestore import open_store
-    from .subclouds import read_corridor, road_patches
+    from .subclouds import road_patches
 
-    lines = map_lines[map_lines.geometry.notna() & ~map_lines.geometry.is_empty]
-    if len(lines) == 0:
-        raise ValueError("the road map holds no line")
-    working, _ = cloud_crs(cloud_path)
-    if working is not None:
-        if lines.crs is None:
-            raise ValueError("the road map has no CRS; cannot match it to the cloud")
-        lines = lines.to_crs(working)
-    snap = SNAP_M if snap_m is None else snap_m
-    report(progress, 0.0, "reading the points along the map")
-    along = shapely.get_coordinates(shapely.segmentize(lines.geometry.values, 0.5))
+    lines, working = _map_in_cloud_crs(cloud_path, map_lines)
     # the file is decoded once into the LiDAR pipeline's tile store; the three passes
     # below read only its cells along the map
     store = open_store(cloud_path, progress=scaled(progress, 0.0, 0.05))
     try:
-        cloud, _ = read_corridor(store, along, SUPPORT_RADIUS_M + snap + 0.5)
-        if len(cloud) == 0:
-            raise ValueError(f"{cloud_path}: no point lies along the map's lines; "
-                             "does the map cover the cloud?")
-        registered = register_map(lines, cloud, snap_m=snap,
-                                  progress=scaled(progress, 0.1, 0.6))
-        del cloud
+        registered = _register(store, cloud_path, lines, snap_m,
+                               progress=scaled(progress, 0.1, 0.6))
         report(progress, 0.6, "cutting the road patches")
         patches = [p for p in road_patches(registered, store,
                                            progress=scaled(progress, 0.6, 1))
@@ -409,11 +424,116 @@ def curb_attractor(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector: st
     return mosaic(maps, crs=crs)
 
 
+#: Side (metres) of the tile-store cells the snakes read: a road patch reads the cells within
+#: its reach (22 m) of its samples, so small cells keep what a patch reads near its corridor
+#: (a 200 m cell of the LiDAR grid would make every patch read 600 m x 600 m).
+PATCH_CELL_M = 25.0
+
+
+@dataclass(frozen=True)
+class _PatchJob:
+    """What a task needs to fit one road patch: picklable, sent to the Dask workers."""
+
+    store: object
+    crs: object
+    fit_options: dict
+    tag: bool
+    """Return the file indices of the patch's points inside its ribbon (tagging)."""
+    attractor: bool
+    """Keep the patch's attractor map in its ribbon (the attractor mosaic)."""
+    results: object = None
+    """Folder of finished patches (None: nothing kept)."""
+
+
+def one_road_maps(registered) -> list:
+    """The registered map cut into one :class:`RegisteredMap` per road, in the order of
+    ``registered.lines``: what one patch task needs (its samples and its line)."""
+    from .registration import RegisteredMap
+
+    bounds = np.flatnonzero(np.diff(registered.road_id)) + 1
+    starts = np.concatenate([[0], bounds])
+    spans = dict(zip(registered.road_id[starts].tolist(),
+                     np.split(np.arange(len(registered.road_id)), bounds)))
+    no_nodes = registered.intersections.iloc[:0]
+    maps = []
+    for k, road in enumerate(registered.lines["road_id"].to_numpy()):  # one per road
+        span = spans.get(int(road), np.empty(0, np.int64))
+        maps.append(RegisteredMap(registered.lines.iloc[k:k + 1], registered.road_id[span],
+                                  registered.station_m[span], registered.xyz[span],
+                                  registered.tangent[span], registered.seen[span], no_nodes,
+                                  registered.crs))
+    return maps
+
+
+def _patch_path(job: _PatchJob, road) -> object:
+    if job.results is None:
+        return None
+    key = digest([int(road.lines["road_id"].iloc[0]), road.xyz.tobytes().hex()])
+    return job.results / f"patch_{int(road.lines['road_id'].iloc[0])}_{key}.pkl"
+
+
+def fit_patch(job: _PatchJob, road):
+    """One road patch as a task: its subcloud from the tile store (the cells along it
+    only), its ribbon; ``(ribbon, road point indices or None)``, or None for a patch with
+    too few points or samples. Kept in ``job.results`` when given, and taken from there."""
+    import os
+    import pickle
+
+    from .subclouds import road_patches
+
+    path = _patch_path(job, road)
+    if path is not None and path.exists():
+        with open(path, "rb") as f:
+            return pickle.load(f)
+    result = None
+    patch = road_patches(road, job.store)[0] if len(road.xyz) >= 2 else None
+    if patch is not None and len(patch.points) >= MIN_NEIGHBOURS:
+        ribbon = fit_ribbon(patch.points, patch.samples_xyz,
+                            np.asarray(patch.plane_normal)[np.asarray(patch.sample_index)],
+                            road_id=patch.road_id, crs=job.crs, **job.fit_options)
+        indices = road_point_indices([patch], [ribbon]) if job.tag else None
+        if not job.attractor:
+            ribbon.attractor = None
+        result = (ribbon, indices)
+    del patch
+    if path is not None:
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        with open(tmp, "wb") as f:
+            pickle.dump(result, f, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, path)
+    return result
+
+
+def _code_fingerprint() -> str:
+    """Hash of the snakes' sources and the libraries' versions: finished patches of another
+    version of the code are not reused."""
+    import hashlib
+    from pathlib import Path
+
+    import scipy
+
+    sha = hashlib.sha1()
+    root = Path(__file__).resolve().parents[1]
+    for source in sorted(root.glob("snakes/*.py")) + [root / "io" / "las.py",
+                                                       root / "lidar" / "tilestore.py"]:
+        sha.update(source.read_bytes())
+    for module in (np, scipy, shapely):
+        sha.update(f"{module.__name__} {module.__version__}".encode())
+    return sha.hexdigest()[:16]
+
+
 def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector: str = "exp",
                        cell_m: float = 0.5, snap_m: float | None = None, tagged_las=None,
-                       clearance_m: float = CLEARANCE_M, progress: Progress = None,
-                       **fit_options) -> MapGuidedRoads:
+                       clearance_m: float = CLEARANCE_M, workers: int = 1,
+                       scheduler: str | None = None, work_dir=None, attractor: bool = True,
+                       progress: Progress = None, **fit_options) -> MapGuidedRoads:
     """Roads of a LAS/LAZ file along an approximate road map (Boyko & Funkhouser, 2011).
+
+    The file is decoded once into a tile store of :data:`PATCH_CELL_M` cells
+    (:mod:`gisroads.lidar.tilestore`); the map is registered on the points along it; then
+    every road patch is a task (:func:`fit_patch`, :func:`gisroads.parallel.run_tasks`)
+    that reads its subcloud from the store and fits its ribbon, here or on Dask: the same
+    ribbons whatever the number of workers.
 
     Parameters
     ----------
@@ -430,6 +550,17 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
         Where to write the cloud with the road points in class 11.
     clearance_m : float
         Height (metres) above which a crossing ribbon passes over another (a bridge).
+    workers : int
+        Patches run as tasks on a local Dask cluster of this many single-threaded worker
+        processes; 1 runs them in this process, without Dask.
+    scheduler : str, optional
+        Address of an existing Dask scheduler (its workers must see ``work_dir``).
+    work_dir : str or Path, optional
+        Folder for the tile store and the finished patches, keyed by the input, the map's
+        registered samples and the parameters: a stopped run started again reuses them.
+        By default a temporary folder, removed at the end.
+    attractor : bool
+        Return the attractor mosaic (False: the patches' maps are dropped as they finish).
     progress : callable, optional
     fit_options
         Passed to :func:`fit_ribbon`.
@@ -438,17 +569,35 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
     -------
     MapGuidedRoads
     """
-    registered, patches, crs = map_patches(cloud_path, map_lines, snap_m=snap_m,
-                                           progress=scaled(progress, 0.0, 0.35))
-    ribbons = []
-    for k, patch in enumerate(patches):  # one per road patch
-        report(progress, 0.35 + 0.45 * k / len(patches),
-               f"ribbon snake {k + 1} of {len(patches)}")
-        ribbons.append(fit_ribbon(
-            patch.points, patch.samples_xyz,
-            np.asarray(patch.plane_normal)[np.asarray(patch.sample_index)],
-            road_id=patch.road_id, curb_detector=curb_detector, cell_m=cell_m, crs=crs,
-            **fit_options))
+    from pathlib import Path
+
+    from ..lidar.tilestore import open_store
+    from ..parallel import run_tasks
+
+    lines, working = _map_in_cloud_crs(cloud_path, map_lines)
+    store = open_store(cloud_path, work_dir, tile_m=PATCH_CELL_M, overlap_m=0.0,
+                       progress=scaled(progress, 0.0, 0.1))
+    try:
+        registered = _register(store, cloud_path, lines, snap_m,
+                               progress=scaled(progress, 0.1, 0.3))
+        crs = working if working is not None else lines.crs
+        options = dict(curb_detector=curb_detector, cell_m=cell_m, **fit_options)
+        results = None
+        if work_dir is not None:
+            results = Path(work_dir) / f"patches-{digest([store.key, options, _code_fingerprint()])}"
+            results.mkdir(parents=True, exist_ok=True)
+        job = _PatchJob(store, crs, options, tagged_las is not None, attractor, results)
+        outcomes = [o for o in run_tasks(partial(fit_patch, job), one_road_maps(registered),
+                                         workers=workers, scheduler=scheduler,
+                                         progress=scaled(progress, 0.3, 0.8),
+                                         what="road patches")
+                    if o is not None]
+    finally:
+        if work_dir is None:
+            store.remove()
+    if not outcomes:
+        raise ValueError(f"{cloud_path}: no road patch holds enough points along the map")
+    ribbons = [ribbon for ribbon, _ in outcomes]
     ribbon_levels(ribbons, clearance_m=clearance_m)
     report(progress, 0.8, "building the road network")
     network = ribbons_network(
@@ -458,7 +607,9 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
     tagged = None
     if tagged_las is not None:
         report(progress, 0.9, "tagging road points")
-        tagged = tag_cloud(cloud_path, tagged_las, road_point_indices(patches, ribbons))
+        tagged = tag_cloud(cloud_path, tagged_las, np.unique(np.concatenate(
+            [indices for _, indices in outcomes])))
     report(progress, 1.0, "done")
-    return MapGuidedRoads(network, ribbons, mosaic([r.attractor for r in ribbons], crs=crs),
+    return MapGuidedRoads(network, ribbons,
+                          mosaic([r.attractor for r in ribbons], crs=crs) if attractor else None,
                           registered, tagged)
