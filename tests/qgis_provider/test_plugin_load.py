@@ -225,3 +225,27 @@ def test_external_mode_cancel_stops_the_command_and_leaves_nothing(qgis_app, tmp
         algorithm.runPrepared(params, context, feedback)
     assert 10 <= max(percents) < 100
     assert list(tmp_path.iterdir()) == []
+
+
+def test_desktop_dialog_runs_the_lidar_pipeline_through_external_gisroads(plugin_zip, lidar_dir,
+                                                                         tmp_path):
+    """The QGIS desktop under Xvfb, started the usual way (system Python), the algorithm's
+    dialog opened, run and grabbed before and after (scripts/qgis_dialog_screenshot.sh)."""
+    from skimage.io import imread
+
+    env = {**os.environ, "GISROADS_EXECUTABLE": external_gisroads(),
+           "OPENBLAS_NUM_THREADS": "1"}
+    for name in ("PYTHONPATH", "QT_QPA_PLATFORM"):   # a desktop on the X server
+        env.pop(name, None)
+    out = tmp_path / "fusa.gpkg"
+    done = subprocess.run(
+        [str(REPO / "scripts" / "qgis_dialog_screenshot.sh"), str(tmp_path),
+         "gisroads:lidarroadnetwork",
+         json.dumps({"INPUT": str(lidar_dir / "fusa.laz"), "OUTPUT": str(out)})],
+        env=env, capture_output=True, text=True, timeout=660)
+    assert "algorithm: ExternalLidarRoadNetwork" in done.stdout, done.stdout + done.stderr
+    assert "finished: True" in done.stdout and out.exists()
+    assert "Traceback" not in done.stdout + done.stderr
+    for name in ("dialog.png", "dialog_after_run.png"):
+        image = imread(tmp_path / name)
+        assert image.shape[0] > 400 and image.shape[1] > 600 and image.std() > 20

@@ -1,0 +1,54 @@
+"""Screenshots of a gisroads algorithm dialog in the QGIS desktop, before and after a run.
+
+Run by ``scripts/qgis_dialog_screenshot.sh`` inside ``qgis --code`` under Xvfb (a QGIS started
+the usual way: the system Python, the plugin from its zip in a throwaway profile), so what a
+user sees can be looked at on a machine without a display. Settings come from the
+environment: ``SHOT_ALGORITHM`` (e.g. ``gisroads:lidarroadnetwork``), ``SHOT_PARAMETERS`` (a
+JSON object) and ``SHOT_DIR`` (where ``dialog.png``, ``dialog_after_run.png`` and
+``shot.log`` go).
+"""
+import json
+import os
+from pathlib import Path
+
+import processing
+from qgis.core import QgsApplication
+from qgis.PyQt.QtCore import QTimer
+
+OUT = Path(os.environ["SHOT_DIR"])
+ALGORITHM = os.environ["SHOT_ALGORITHM"]
+PARAMETERS = json.loads(os.environ.get("SHOT_PARAMETERS", "{}"))
+
+
+def _log(text: str) -> None:
+    with open(OUT / "shot.log", "a") as log:
+        log.write(text + "\n")
+
+
+def _open_dialog() -> None:
+    registry = QgsApplication.processingRegistry()
+    algorithm = registry.algorithmById(ALGORITHM)
+    _log(f"algorithm: {type(algorithm).__name__ if algorithm else None}")
+    if algorithm is None:
+        _log("providers: " + ", ".join(p.id() for p in registry.providers()))
+        QgsApplication.exit(1)
+        return
+    dialog = processing.createAlgorithmDialog(ALGORITHM, PARAMETERS)
+    dialog.show()
+
+    def after_run(successful: bool, results: dict) -> None:
+        _log(f"finished: {successful}, results: {results}")
+        # let the dialog show the end of its log first
+        QTimer.singleShot(1000, lambda: (dialog.grab().save(str(OUT / "dialog_after_run.png")),
+                                         QgsApplication.exit(0 if successful else 1)))
+
+    def run() -> None:
+        dialog.grab().save(str(OUT / "dialog.png"))
+        dialog.algorithmFinished.connect(after_run)
+        dialog.runAlgorithm()
+
+    QTimer.singleShot(2000, run)
+
+
+# after QGIS has loaded its plugins and providers
+QTimer.singleShot(8000, _open_dialog)
