@@ -62,6 +62,18 @@ exact there); larger ones with ARPACK in shift-invert mode."""
 DISCRETISATION_ITERATIONS = 30
 """Most alternations of Yu & Shi's discretisation (their code: 20; it usually stops by 10)."""
 
+DISCRETISATION_TIE = 1e-6
+"""Similarities (cosines, and sums of them) of the discretisation closer than this are
+ties, broken by node order rather than by rounding (see ``_discretise``)."""
+
+RELIABLE_ROW_NORM = 1e-6
+"""Embedding rows shorter than this times the longest have no reliable direction (the
+eigenvectors are accurate to ~1e-13 per entry) and do not steer the discretisation."""
+
+EMPTY_SEGMENT_PULL = 1e-6
+"""Weight of the row an empty segment is reseeded with in the discretisation's Procrustes
+step: it fixes the rotation of empty segments, which the SVD alone leaves arbitrary."""
+
 SLIC_COMPACTNESS = 3.0
 """SLIC compactness with values in units of the image's pixel noise: one superpixel grid
 step of distance weighs as much as three noise standard deviations of value, so noise alone
@@ -117,29 +129,84 @@ def leading_eigenpairs(affinity: sparse.csr_matrix, k: int, *, seed: int = 0
     return 1.0 - values[order], vectors[:, order]
 
 
+def _first_within(values: np.ndarray, tolerance: float, axis: int | None = None):
+    """Index of the first value within ``tolerance`` of the smallest: ``np.argmin`` with
+    near-ties broken by position instead of by rounding."""
+    return np.argmax(values <= values.min(axis=axis, keepdims=True) + tolerance, axis=axis)
+
+
+def _reseed_empty(procrustes: np.ndarray, rows: np.ndarray, empty: np.ndarray) -> None:
+    """Give the empty segments' rows of the Procrustes matrix ``procrustes`` (in place) the
+    rows of the embedding farthest from the space the other segments span, one after the
+    other, weighted by :data:`EMPTY_SEGMENT_PULL`.
+
+    Without them the matrix is singular and the SVD rotates its null space arbitrarily; with
+    them the rotation is unique, and the empty segments restart where no segment reaches
+    (as k-means restarts an empty cluster at a far point). Distances to a subspace do not
+    depend on the basis of the embedding."""
+    if not len(empty):
+        return
+    _, singular, vt = np.linalg.svd(procrustes)
+    spanned = vt[singular > 1e-9 * max(singular.max(), np.finfo(float).tiny)]
+    residual = rows - (rows @ spanned.T) @ spanned
+    for segment in empty:
+        distance = np.linalg.norm(residual, axis=1)
+        farthest = _first_within(-distance, DISCRETISATION_TIE)
+        procrustes[segment] = EMPTY_SEGMENT_PULL * rows[farthest]
+        if distance[farthest] > 0:
+            direction = residual[farthest] / distance[farthest]
+            residual -= np.outer(residual @ direction, direction)
+
+
 def _discretise(embedding: np.ndarray, seed: int) -> np.ndarray:
-    """Yu & Shi (2003) multiclass discretisation of an (n, k) spectral embedding."""
+    """Yu & Shi (2003) multiclass discretisation of an (n, k) spectral embedding.
+
+    In exact arithmetic the result depends only on the subspace the eigenvectors span, not
+    on which orthonormal basis of it the eigensolver returns (rotations and sign flips of
+    the columns cancel out). Three places turn rounding into different labels, and each is
+    made deterministic here, so that the same graph gives the same labels with any
+    numpy/scipy/LAPACK (the two environments' ARPACK and LAPACK return bases that differ by
+    rotations within near-degenerate eigenspaces, and ~1e-13 per entry):
+
+    - the initial rotation picks, k times, the row least similar to those already picked;
+      whole connected components are exactly orthogonal to each other, so the smallest
+      similarities tie to 1e-17: values within :data:`DISCRETISATION_TIE` of the smallest
+      tie, and the first of them is taken; the same for the labels' argmax;
+    - rows of nearly zero norm (superpixels of nearly zero degree) have a direction known
+      only to (solver error / norm): rows below :data:`RELIABLE_ROW_NORM` of the largest
+      are neither picked nor used in the rotation; they get the label of their argmax at
+      the end;
+    - a segment left empty makes the Procrustes matrix singular, and the rotation of its
+      null space is whatever the SVD returns: an empty segment is reseeded with the row
+      farthest from the space the other segments span (:func:`_reseed_empty`).
+    """
     n, k = embedding.shape
-    norms = np.linalg.norm(embedding, axis=1, keepdims=True)
-    rows = embedding / np.maximum(norms, np.finfo(float).tiny)
+    norms = np.linalg.norm(embedding, axis=1)
+    rows = embedding / np.maximum(norms, np.finfo(float).tiny)[:, None]
+    reliable = norms >= RELIABLE_ROW_NORM * norms.max()
+    used = rows[reliable]
     # initial rotation: k rows as orthogonal to each other as possible
     rotation = np.zeros((k, k))
-    rotation[:, 0] = rows[np.random.default_rng(seed).integers(n)]
-    similarity = np.zeros(n)
+    first = np.random.default_rng(seed).integers(n)
+    first = np.flatnonzero(np.roll(reliable, -first))[0] + first  # the next reliable row
+    rotation[:, 0] = rows[first % n]
+    similarity = np.zeros(len(used))
     for j in range(1, k):
-        similarity += np.abs(rows @ rotation[:, j - 1])
-        rotation[:, j] = rows[np.argmin(similarity)]
-    last_objective = np.inf
+        similarity += np.abs(used @ rotation[:, j - 1])
+        rotation[:, j] = used[_first_within(similarity, DISCRETISATION_TIE)]
+    labels = None
     for _ in range(DISCRETISATION_ITERATIONS):
-        labels = np.argmax(rows @ rotation, axis=1)
-        indicator = sparse.csr_matrix((np.ones(n), (np.arange(n), labels)), shape=(n, k))
-        u, singular, vt = np.linalg.svd(np.asarray(indicator.T @ rows))
-        objective = 2 * (n - singular.sum())
-        if abs(last_objective - objective) <= 1e-12 * n:
+        previous, labels = labels, _first_within(-(used @ rotation), DISCRETISATION_TIE,
+                                                 axis=1)
+        if previous is not None and np.array_equal(labels, previous):
             break
-        last_objective = objective
+        indicator = sparse.csr_matrix((np.ones(len(used)), (np.arange(len(used)), labels)),
+                                      shape=(len(used), k))
+        procrustes = np.asarray(indicator.T @ used)
+        _reseed_empty(procrustes, used, np.flatnonzero(np.bincount(labels, minlength=k) == 0))
+        u, _, vt = np.linalg.svd(procrustes)
         rotation = vt.T @ u.T
-    return labels
+    return _first_within(-(rows @ rotation), DISCRETISATION_TIE, axis=1)
 
 
 def ncut(affinity, n_segments: int, *, seed: int = 0) -> np.ndarray:
