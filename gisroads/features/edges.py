@@ -67,6 +67,21 @@ def fill_nearest(image: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return image[..., rows, cols]
 
 
+def _exp(values) -> np.ndarray:
+    """``exp`` computed in float64 and rounded to float32.
+
+    numpy's float32 ``exp``/``log`` (and float64 ones) are SIMD kernels that differ by an ulp
+    between numpy versions and CPUs (numpy 1.24 and 2.x on AVX-512 do); a float64 result one
+    ulp off almost never rounds to another float32 (about 2^-29 of the values), so the
+    edges are the same bits in both environments of the README."""
+    return np.exp(np.asarray(values, np.float64)).astype(np.float32)
+
+
+def _log(values) -> np.ndarray:
+    """``log`` computed in float64 and rounded to float32 (see :func:`_exp`)."""
+    return np.log(np.asarray(values, np.float64)).astype(np.float32)
+
+
 def _frequency_grid(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """Radius (cycles per pixel) and angle (radians, north-up) of each FFT frequency."""
     f_col = fft.fftfreq(shape[1]).astype(np.float32)[None, :]
@@ -130,10 +145,13 @@ def local_energy(image, *, wavelengths_px=(4, 8, 16), n_orientations: int = 8,
     spectrum = fft.fft2(padded)
 
     radius, angle = _frequency_grid(fft_shape)
+    radius = radius.astype(np.float64)
     radius[0, 0] = 1.0  # the log below; the DC term is zeroed afterwards
-    log_width = 2 * np.log(sigma_on_f) ** 2
-    radial = sum(np.exp(-np.log(radius * wavelength) ** 2 / log_width)
-                 for wavelength in wavelengths_px).astype(np.float32)
+    log_width = 2 * float(np.log(sigma_on_f)) ** 2
+    # the filters in float64, rounded to float32 (see _exp): numpy's float32 exp and log
+    # differ by an ulp between versions and CPUs (SIMD kernels), and so would the edges
+    radial = sum(_exp(-np.log(radius * wavelength) ** 2 / log_width)
+                 for wavelength in wavelengths_px)
     radial[0, 0] = 0.0
     spectrum *= radial
 
@@ -143,15 +161,15 @@ def local_energy(image, *, wavelengths_px=(4, 8, 16), n_orientations: int = 8,
     energies = np.empty((n_orientations,) + image.shape, np.float32)
     for o in range(n_orientations):
         # one half-plane only, around the normal direction o*spacing: an analytic filter
-        offset = np.mod(angle - o * spacing + np.pi, 2 * np.pi) - np.pi
+        offset = np.mod(angle.astype(np.float64) - o * spacing + np.pi, 2 * np.pi) - np.pi
         angular = np.where(np.abs(offset) < np.pi / 2,
-                           np.exp(-offset ** 2 / (2 * angular_sigma ** 2)), 0).astype(np.float32)
+                           _exp(-offset ** 2 / (2 * angular_sigma ** 2)), np.float32(0))
         energies[o] = np.abs(fft.ifft2(spectrum * angular)[core])
 
     best = np.argmax(energies, axis=0)
     before, centre, after = (
-        np.log(np.maximum(np.take_along_axis(energies, ((best + step) % n_orientations)[None],
-                                             axis=0)[0], np.finfo(np.float32).tiny))
+        _log(np.maximum(np.take_along_axis(energies, ((best + step) % n_orientations)[None],
+                                           axis=0)[0], np.finfo(np.float32).tiny))
         for step in (-1, 0, 1))
     curvature = before - 2 * centre + after
     concave = curvature < 0
@@ -159,7 +177,7 @@ def local_energy(image, *, wavelengths_px=(4, 8, 16), n_orientations: int = 8,
     shift = np.clip(shift, -0.5, 0.5)
     peak = centre - 0.25 * (before - after) * shift
     normal = (best + shift) * spacing
-    magnitude[valid] = np.exp(peak[valid])
+    magnitude[valid] = _exp(peak[valid])
     orientation[valid] = np.mod(normal[valid] + np.pi / 2, np.pi)
     orientation[orientation >= np.float32(np.pi)] = 0.0  # float32 rounding at the wrap
     return magnitude, orientation
