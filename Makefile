@@ -20,9 +20,16 @@ demo: setup-core
 	$(VENV)/gisroads demo --out out/demo
 
 ## test: core suite on modern wheels, core suite on Debian's QGIS stack, provider suite in QGIS
-test: setup plugin
+## (each part alone: make test-core, test-core-qgis, test-qgis)
+test: test-core test-core-qgis test-qgis
+
+test-core: setup
 	$(VENV)/python -m pytest -q tests --ignore=tests/qgis_provider
+
+test-core-qgis: setup
 	$(QVENV)/python -m pytest -q -p no:cacheprovider tests --ignore=tests/qgis_provider
+
+test-qgis: setup plugin
 	GISROADS_REQUIRE_QGIS=1 $(QVENV)/python -m pytest -q -p no:cacheprovider tests/qgis_provider
 
 plugin: dist/gisroads_qgis.zip
