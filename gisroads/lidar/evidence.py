@@ -19,6 +19,18 @@ Cues (every point and cell through :func:`numpy.bincount` and :mod:`scipy.ndimag
     percentile over the cloud's cells). Asphalt returns every pulse; buildings leave no
     ground return and water almost none; the ground under a tree crown still gets the
     crown's gap fraction (about 0.4). None at 0.05, full from 0.3.
+``pulses``
+    Pulses (first returns) per m2, as a share of the cloud's median. Asphalt, concrete,
+    grass and roofs return nearly every pulse at 1064 nm; water is specular and absorbs, so
+    most pulses that reach it come back with nothing (on the ponds of the Megaplot forest
+    plot 8-22 % of the median, their few returns dark, single and classed ground); so does a
+    data gap. The count is smoothed over a window of about 12 pulses (sigma 0.75-2.5 m) and
+    divided by the smoothed *footprint* (the cells with a return within ``max(1.5 m, 2.5
+    cells)``), not by the window's area: at the edge of the data, where half the window
+    holds no cell of the cloud, the measure is the cloud's density, not half of it. None at
+    0.15, full from 0.4 (truth roads: at least 0.51 on fusa, 0.36 on the thinned IGN tile
+    for 99 % of their cells, where the scan pattern and the thinning leave half the median
+    in places).
 ``roughness``
     Residual (m, one standard deviation) of a plane fitted to the ground returns within
     the plane window. Pavement is flat to the ranging noise; grass adds a few cm, shrubs and
@@ -62,8 +74,9 @@ rises less than ``dh0_m + slope * window growth`` above the opening, up to ``dh_
 and the ground returns are those within ``ground_tolerance_m`` of it.
 
 **Rule.** Two kinds of cue. *Gates* say where a road cannot be: ``height`` (a roof, a
-car), ``density`` (a building, water), ``slope`` and ``classification`` (vegetation,
-building, water classes at the ground); their memberships multiply. *Graded* cues say what
+car), ``density`` (a building, water), ``pulses`` (water, a data gap), ``slope`` and
+``classification`` (vegetation, building, water classes at the ground); their memberships
+multiply. *Graded* cues say what
 the surface looks like: ``intensity`` (weight 2: the only cue that tells pavement from
 grass), ``roughness`` (1) and ``returns`` (0.5); they enter as their weighted geometric
 mean, ``G = exp(sum w_k log m_k / sum w_k)``, so that three cues at 0.8 give 0.8 rather
@@ -87,6 +100,18 @@ lines its aisles does: :func:`vehicle_cells` marks the objects of a vehicle's he
 :func:`without_car_park_aisles` sets the likelihood of the lined roads to 0 for a second
 run of the network stage (beyond the paper, like this whole module).
 
+**Shores.** Once the ponds are out, the open ground left between a pond and the forest is a
+strip as wide as a street, flat, open to the sky, and skeletonised into a road. What lines
+it is the water: :func:`dropout_cells` marks the cells of the ``pulses`` cue's none end, and
+:func:`without_flanked_roads` takes a network road whose flanks (:func:`flank_share`,
+0.5-5.5 m past its edges, both sides) are at least :data:`SHORE_FLANK_SHARE` (0.1) dropouts
+out, with the car-park aisles, before the second run of the network stage. Roads of the
+truth measure 0.0 (fusa, the IGN tile, the synthetic scenes; every line of the IGN tile's
+network at most 0.011, autzen's by its river up to 0.12); Megaplot's two shores 0.16 and
+0.18 (0.5 would be one flank all water: a curved shore's flank also reaches the forest). A
+road along a lake or river with no verge between it and the water is lost the same way
+(beyond the paper, like this whole module).
+
 **Measured** (``bench/lidar_evidence.py``; pixel ROC AUC against the truth road area, NaN
 counted as 0): fusa.laz 0.860 (intensity alone 0.818, height 0.726, roughness 0.657,
 slope 0.643, density 0.628, returns 0.582, classification 0.572), in about 0.5 s for its
@@ -101,7 +126,8 @@ intensity ramp's none end at 0.8: 0.870, 0.806, 8 %, 5 %, 26 %, 0.950).
 (:func:`without_car_park_aisles`, a second run), 3 m buffer: fusa completeness 0.799,
 correctness 0.592 (0.693 counting its car-park aisles as right), 4 of 7 junctions; the IGN
 tile completeness 0.748; no line on zurich, crop_1 and the extra-bytes file, 0.39 km on the
-Megaplot forest plot (its clearings), 0.75 km on autzen; the synthetic street grid
+Megaplot forest plot (its ponds and their shores: 0.02 km with the ``pulses`` cue and the
+shores out, issue 10), 0.75 km on autzen; the synthetic street grid
 0.989 / 1.000, the scene with every feature 0.982 / 0.940. Before (ramp to 0.8, threshold
 0.8 alone): fusa 0.800 / 0.464, IGN 0.613, zurich 0.016 km, Megaplot 0.42 km, extra-bytes
 0.33 km, the synthetic scenes 0.991 / 1.000 and 0.894 / 0.924.
@@ -143,6 +169,8 @@ class EvidenceRule:
         Plane residual above the file's noise floor, metres.
     slope : (float, float)
         Plane gradient, rise over run.
+    pulses : (float, float)
+        Pulse density (first returns) as a share of the cloud's typical pulse density.
     intensity : (float, float)
         Ground intensity as a ratio to the bright ground.
     returns : (float, float)
@@ -159,11 +187,12 @@ class EvidenceRule:
     density: tuple[float, float] = (0.3, 0.05)
     roughness_m: tuple[float, float] = (0.03, 0.15)
     slope: tuple[float, float] = (0.10, 0.25)
+    pulses: tuple[float, float] = (0.4, 0.15)
     intensity: tuple[float, float] = (0.3, 0.6)
     returns: tuple[float, float] = (0.15, 0.75)
     returns_floor: float = 0.3
     roughness_floor: float = 0.3
-    gates: tuple[str, ...] = ("height", "density", "slope", "classification")
+    gates: tuple[str, ...] = ("height", "density", "pulses", "slope", "classification")
     weights: tuple[tuple[str, float], ...] = (
         ("intensity", 2.0), ("roughness", 1.0), ("returns", 0.5))
 
@@ -185,12 +214,15 @@ class EvidenceReferences:
         Ground intensity of the bright ground (after the split-pulse gain).
     split_share : float
         Share of a pulse's intensity a return of a split pulse keeps (1: not measured).
+    pulse_density : float or None
+        Pulses (first returns) per m2 of the covered cells (None: not measured).
     """
 
     open_density: float
     noise_floor_m: float
     bright_intensity: float | None = None
     split_share: float = 1.0
+    pulse_density: float | None = None
 
 
 @dataclass(frozen=True)
@@ -413,6 +445,25 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
     memberships["density"] = ramp(measures["density"], *rule.density)
     used["density"] = f"ground returns per m2 over {open_density:.2f} (open ground)"
 
+    # pulses: first returns per m2 of the footprint, relative to the cloud's typical density
+    first = inside & (np.asarray(cloud.return_number) <= 1)
+    n_first = grid(None, first)
+    mean_pulses = n_first.sum() / max(occupied.sum(), 1) / cell_m ** 2
+    sigma_pulse = np.clip(np.sqrt(12.0 / (2 * np.pi * max(mean_pulses, 1e-6))),
+                          0.75, 2.5) / cell_m
+    pulses = _ratio(_smooth(n_first, sigma_pulse),
+                    _smooth(footprint.astype(float), sigma_pulse)) / cell_m ** 2
+    if references is not None and references.pulse_density is not None:
+        pulse_density = references.pulse_density
+    else:
+        pulse_density = float(np.nanmedian(pulses[occupied])) if occupied.any() else 0.0
+    if pulse_density > 0:
+        measures["pulses"] = pulses / pulse_density
+        memberships["pulses"] = ramp(measures["pulses"], *rule.pulses)
+        used["pulses"] = f"pulses per m2 over {pulse_density:.2f} (the cloud's median)"
+    else:
+        missing["pulses"] = "no pulse density"
+
     # roughness and slope: a plane fitted to the ground returns in the plane window
     origin = np.array([transform.c, transform.f, np.median(z[ground]) if ground.any() else 0])
     gx, gy, gz = (xyz[:, k] - origin[k] for k in range(3))
@@ -536,7 +587,7 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
         measures={k: raster(np.where(footprint, v, np.nan)) for k, v in measures.items()},
         used=used, missing=missing, references=EvidenceReferences(
             open_density=open_density, noise_floor_m=floor, bright_intensity=bright,
-            split_share=share), cell_m=float(cell_m))
+            split_share=share, pulse_density=pulse_density), cell_m=float(cell_m))
 
 
 #: Lowest return above the terrain of an object of a vehicle's height (car 1.4-1.9 m, van
@@ -545,6 +596,9 @@ VEHICLE_HEIGHT_M = (0.8, 2.5)
 #: A road whose flanks are at least this share vehicle cells is a car-park aisle
 #: (:func:`without_car_park_aisles`).
 CAR_PARK_FLANK_SHARE = 0.15
+#: A road whose flanks are at least this share pulse dropouts (:func:`dropout_cells`) is a
+#: shore or the rim of a clearing around a pond (:func:`without_flanked_roads`).
+SHORE_FLANK_SHARE = 0.1
 
 
 def vehicle_cells(evidence: RoadEvidence, *, height_m: tuple[float, float] = VEHICLE_HEIGHT_M,
@@ -582,9 +636,10 @@ def vehicle_cells(evidence: RoadEvidence, *, height_m: tuple[float, float] = VEH
     return GeoRaster(out, raster.transform, raster.crs, nodata=np.nan)
 
 
-def vehicle_flank_share(centrelines, vehicles: GeoRaster, *, gap_m: float = 0.5,
-                        depth_m: float = 5.0) -> np.ndarray:
-    """Per road, the share of its two flanks covered by vehicles (:func:`vehicle_cells`).
+def flank_share(centrelines, cells: GeoRaster, *, gap_m: float = 0.5,
+                depth_m: float = 5.0) -> np.ndarray:
+    """Per road, the share of its two flanks covered by marked cells (vehicles:
+    :func:`vehicle_cells`; pulse dropouts: :func:`dropout_cells`).
 
     A flank is the band from ``width / 2 + gap_m`` to ``width / 2 + gap_m + depth_m`` on
     either side of the centre line, sampled every cell along offset lines; samples outside
@@ -597,8 +652,8 @@ def vehicle_flank_share(centrelines, vehicles: GeoRaster, *, gap_m: float = 0.5,
     centrelines : GeoDataFrame
         LineStrings with ``width_m`` (:func:`gisroads.network.rasters.raster_to_network`),
         in the raster's CRS.
-    vehicles : GeoRaster
-        1 vehicle, 0 not, NaN unknown (:func:`vehicle_cells`).
+    cells : GeoRaster
+        1 marked, 0 not, NaN unknown.
     gap_m, depth_m : float
         Start of the flank past the road's edge, and its depth, metres.
 
@@ -610,17 +665,17 @@ def vehicle_flank_share(centrelines, vehicles: GeoRaster, *, gap_m: float = 0.5,
     lines = np.asarray(centrelines.geometry.values, dtype=object)
     if len(lines) == 0:
         return np.zeros(0)
-    cell = vehicles.pixel_size
+    cell = cells.pixel_size
     half = np.asarray(centrelines["width_m"], np.float64) / 2 + gap_m
     hits = np.zeros(len(lines))
     count = np.zeros(len(lines))
-    data = np.asarray(vehicles.data)
+    data = np.asarray(cells.data)
     for offset in np.arange(cell / 2, depth_m, cell):
         for side in (-1.0, 1.0):
             curves = shapely.offset_curve(lines, side * (half + offset))
             points, owner = shapely.get_coordinates(shapely.segmentize(curves, cell),
                                                     return_index=True)
-            rows, cols = vehicles.xy_to_rowcol(points[:, 0], points[:, 1])
+            rows, cols = cells.xy_to_rowcol(points[:, 0], points[:, 1])
             inside = (rows >= 0) & (rows < data.shape[0]) & (cols >= 0) & (cols < data.shape[1])
             value = np.full(len(points), np.nan)
             value[inside] = data[rows[inside], cols[inside]]
@@ -628,6 +683,83 @@ def vehicle_flank_share(centrelines, vehicles: GeoRaster, *, gap_m: float = 0.5,
             count += np.bincount(owner[seen], minlength=len(lines))
             hits += np.bincount(owner[seen], weights=value[seen], minlength=len(lines))
     return hits / np.maximum(count, 1)
+
+
+def vehicle_flank_share(centrelines, vehicles: GeoRaster, **options) -> np.ndarray:
+    """Per road, the share of its two flanks covered by vehicles (:func:`vehicle_cells`):
+    :func:`flank_share`."""
+    return flank_share(centrelines, vehicles, **options)
+
+
+def dropout_cells(evidence: RoadEvidence, *,
+                  max_pulses: float = EvidenceRule().pulses[1]) -> GeoRaster:
+    """Cells where most pulses came back with no return: water, a data gap.
+
+    The ``pulses`` measure (first returns per m2 over the cloud's median) is at most
+    ``max_pulses`` (the none end of the ``pulses`` ramp: under 15 % of the pulses).
+
+    Returns
+    -------
+    GeoRaster
+        float32 on the evidence's grid: 1 dropout, 0 not, NaN where the measure has no value
+        (outside the data; everywhere when the cloud gave no pulse density).
+    """
+    raster = evidence.likelihood
+    measure = evidence.measures.get("pulses")
+    if measure is None:
+        out = np.full(raster.shape, np.nan, np.float32)
+    else:
+        m = np.asarray(measure.data, np.float64)
+        with np.errstate(invalid="ignore"):
+            out = np.where(np.isfinite(m), (m <= max_pulses).astype(float), np.nan)
+    return GeoRaster(np.asarray(out, np.float32), raster.transform, raster.crs, nodata=np.nan)
+
+
+def without_flanked_roads(likelihood: GeoRaster, centrelines, flanks: dict, *,
+                          margin_m: float = 1.0) -> tuple[GeoRaster, object]:
+    """The likelihood with the roads whose flanks are lined by what no road is lined by
+    set to 0: run the network stage again on it (beyond the paper).
+
+    Parameters
+    ----------
+    likelihood : GeoRaster
+        The road likelihood (:attr:`RoadEvidence.likelihood`).
+    centrelines : GeoDataFrame
+        The roads of a network built on it (``width_m``), in its CRS.
+    flanks : dict of str to (GeoRaster, float)
+        A reason (``"car-park aisle"``, ``"shore"``) to the cells that mark it (1 marked, 0
+        not, NaN unknown, on any grid in the likelihood's CRS) and the flank share
+        (:func:`flank_share`) from which a road is taken for it. The first reason that
+        applies is a road's.
+    margin_m : float
+        A taken road's band ``width / 2 + margin_m`` is set to 0, metres.
+
+    Returns
+    -------
+    likelihood : GeoRaster
+        A copy, the taken roads at 0.
+    taken : GeoDataFrame
+        The roads taken, with their ``reason`` and ``flank_share``.
+    """
+    from rasterio import features
+
+    reason = np.full(len(centrelines), "", dtype=object)
+    share = np.zeros(len(centrelines))
+    found = np.zeros(len(centrelines), bool)
+    for name, (cells, max_share) in flanks.items():
+        measured = flank_share(centrelines, cells)
+        hit = ~found & (measured >= max_share)
+        reason[hit], share[hit], found = name, measured[hit], found | hit
+    taken = centrelines[found].assign(reason=reason[found], flank_share=share[found])
+    data = np.array(likelihood.data, dtype=np.float32, copy=True)
+    if len(taken):
+        bands = shapely.buffer(taken.geometry.values,
+                               taken["width_m"].to_numpy(float) / 2 + margin_m)
+        erase = features.rasterize(list(bands), out_shape=data.shape,
+                                   transform=likelihood.transform).astype(bool)
+        data[erase & np.isfinite(data)] = 0.0
+    return GeoRaster(data, likelihood.transform, likelihood.crs,
+                     nodata=likelihood.nodata), taken
 
 
 def without_car_park_aisles(likelihood: GeoRaster, centrelines, vehicles: GeoRaster, *,
@@ -668,16 +800,8 @@ def without_car_park_aisles(likelihood: GeoRaster, centrelines, vehicles: GeoRas
     aisles : GeoDataFrame
         The roads taken for aisles, with their ``vehicle_share``.
     """
-    from rasterio import features
-
-    share = vehicle_flank_share(centrelines, vehicles)
-    aisles = centrelines[share >= max_share].assign(vehicle_share=share[share >= max_share])
-    data = np.array(likelihood.data, dtype=np.float32, copy=True)
-    if len(aisles):
-        bands = shapely.buffer(aisles.geometry.values,
-                               aisles["width_m"].to_numpy(float) / 2 + margin_m)
-        erase = features.rasterize(list(bands), out_shape=data.shape,
-                                   transform=likelihood.transform).astype(bool)
-        data[erase & np.isfinite(data)] = 0.0
-    return GeoRaster(data, likelihood.transform, likelihood.crs,
-                     nodata=likelihood.nodata), aisles
+    cleared, taken = without_flanked_roads(likelihood, centrelines,
+                                           {"car-park aisle": (vehicles, max_share)},
+                                           margin_m=margin_m)
+    return cleared, taken.drop(columns="reason").rename(
+        columns={"flank_share": "vehicle_share"})

@@ -9,10 +9,12 @@ can be classified back in 3D (:mod:`gisroads.lidar.tagging`).
 
 ``cue="evidence"``, beyond the paper (:func:`evidence_raster`): per tile, the road
 likelihood of everything the cloud carries (:mod:`gisroads.lidar.evidence`: intensity,
-height above the terrain, density, roughness, slope, returns, the file's classification),
-every tile normalised by the references of the first, mosaicked from the tiles' cores; then
-the project's one network stage (:func:`gisroads.network.rasters.raster_to_network`): gaps
-bridged by the integer program, junctions built, curved roads followed.
+height above the terrain, density, pulses, roughness, slope, returns, the file's
+classification), every tile normalised by the references of the first, mosaicked from the
+tiles' cores; then the project's one network stage
+(:func:`gisroads.network.rasters.raster_to_network`): gaps bridged by the integer program,
+junctions built, curved roads followed; car-park aisles and shores (known by what lines
+them) out, and the network stage again.
 """
 from __future__ import annotations
 
@@ -38,7 +40,8 @@ from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.rasters import raster_to_network
 from ..vectorize.ribbons import rectangles_to_network, ribbons_to_network
-from .evidence import road_evidence, vehicle_cells, without_car_park_aisles
+from .evidence import (CAR_PARK_FLANK_SHARE, SHORE_FLANK_SHARE, dropout_cells, road_evidence,
+                       vehicle_cells, without_flanked_roads)
 from .ground import GroundPlanes, ground_planes
 from .hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, likelihood_maps,
                          road_hypotheses)
@@ -65,8 +68,9 @@ class EvidenceMosaic(NamedTuple):
 
     likelihood: GeoRaster | None
     """2-D road likelihood, float32 in [0, 1], NaN outside the data, working metre CRS."""
-    vehicles: GeoRaster | None
-    """Vehicle cells (:func:`gisroads.lidar.evidence.vehicle_cells`) on the same grid."""
+    flanks: GeoRaster | None
+    """Two bands on the same grid: vehicle cells (:func:`gisroads.lidar.evidence.vehicle_cells`)
+    and pulse dropout cells (:func:`gisroads.lidar.evidence.dropout_cells`)."""
     used: dict
     """Cue -> how it was measured (first tile)."""
     missing: dict
@@ -239,10 +243,9 @@ def _tile_result_path(job: _TileJob, tile: Tile) -> Path | None:
 
 def _run_tile(job: _TileJob, tile: Tile):
     """``(reused, result)`` of one tile: its :class:`TileRoads` (intensity cue) or
-    ``(likelihood and vehicle cells, references, used, missing)`` (evidence cue), None for a
-    tile with fewer
-    than ``min_points`` points. A finished tile is written to ``job.results`` (atomically)
-    and taken from there when it is already there."""
+    ``(likelihood, vehicle and dropout cells, references, used, missing)`` (evidence cue),
+    None for a tile with fewer than ``min_points`` points. A finished tile is written to
+    ``job.results`` (atomically) and taken from there when it is already there."""
     path = _tile_result_path(job, tile)
     if path is not None and path.exists():
         with open(path, "rb") as f:
@@ -256,7 +259,8 @@ def _run_tile(job: _TileJob, tile: Tile):
             evidence = road_evidence(cloud, bounds=tile.bounds, references=job.references,
                                      **job.options)
             raster = evidence.likelihood
-            bands = np.stack([raster.data, vehicle_cells(evidence).data])
+            bands = np.stack([raster.data, vehicle_cells(evidence).data,
+                              dropout_cells(evidence).data])
             result = (GeoRaster(bands, raster.transform, raster.crs),
                       evidence.references, evidence.used, evidence.missing)
     del cloud
@@ -410,15 +414,16 @@ def _evidence_from_store(store: TileStore, *, cell_m, min_points, workers, sched
         return EvidenceMosaic(None, None, {}, {})
     _, _, used, missing = next(r for r in results if r is not None)
     mosaic = mosaic_cores(pieces, cell_m)
-    return EvidenceMosaic(*(GeoRaster(band, mosaic.transform, mosaic.crs)
-                            for band in mosaic.data), used, missing)
+    return EvidenceMosaic(GeoRaster(mosaic.data[0], mosaic.transform, mosaic.crs),
+                          GeoRaster(mosaic.data[1:], mosaic.transform, mosaic.crs),
+                          used, missing)
 
 
 def _evidence_roads(path, *, threshold: float, network_options: dict | None,
                     progress: Progress, **raster_options) -> LidarRoads:
     working, source = inputs_crs(las_inputs(path))
     run: dict = {}
-    likelihood, vehicles, used, _ = evidence_raster(
+    likelihood, flanks, used, _ = evidence_raster(
         path, progress=scaled(progress, 0.0, 0.6), _run=run, **raster_options)
     if likelihood is None:
         network = ribbons_to_network(_no_lines(working), method=EVIDENCE_METHOD)
@@ -426,10 +431,16 @@ def _evidence_roads(path, *, threshold: float, network_options: dict | None,
         options = {**EVIDENCE_NETWORK_OPTIONS, **(network_options or {})}
         network = raster_to_network(likelihood, threshold=threshold, method=EVIDENCE_METHOD,
                                     progress=scaled(progress, 0.6, 0.8), **options)
-        # car-park aisles are known by the cars that line them: out, and the network again
-        likelihood, aisles = without_car_park_aisles(likelihood, network.centrelines,
-                                                     vehicles)
-        if len(aisles):
+        # car-park aisles are known by the cars that line them, shores (and the rims of
+        # clearings around ponds) by the pulse dropouts of the water: out, and the network
+        # again
+        vehicles, dropouts = (GeoRaster(band, flanks.transform, flanks.crs)
+                              for band in flanks.data)
+        likelihood, taken = without_flanked_roads(
+            likelihood, network.centrelines,
+            {"car-park aisle": (vehicles, CAR_PARK_FLANK_SHARE),
+             "shore": (dropouts, SHORE_FLANK_SHARE)})
+        if len(taken):
             network = raster_to_network(likelihood, threshold=threshold,
                                         method=EVIDENCE_METHOD,
                                         progress=scaled(progress, 0.8, 1.0), **options)

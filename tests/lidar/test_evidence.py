@@ -73,8 +73,8 @@ def test_likelihood_separates_the_roads_of_a_synthetic_scene(scene_cloud):
     assert np.nanmin(data) >= 0.0 and np.nanmax(data) <= 1.0
     # measured 0.948
     assert auc_against(evidence, truth) > 0.92
-    assert set(evidence.used) == {"height", "density", "roughness", "slope", "intensity",
-                                  "returns", "classification"}
+    assert set(evidence.used) == {"height", "density", "pulses", "roughness", "slope",
+                                  "intensity", "returns", "classification"}
     assert evidence.missing == {}
     for name, member in evidence.memberships.items():
         assert member.shape == evidence.likelihood.shape, name
@@ -105,7 +105,7 @@ def test_a_cloud_without_intensity_returns_or_classes_still_works(scene_cloud):
                       np.ones(n, np.uint8), cloud.crs, cloud.source_crs)
     evidence = road_evidence(bare)
     assert set(evidence.missing) == {"intensity", "returns", "classification"}
-    assert set(evidence.used) == {"height", "density", "roughness", "slope"}
+    assert set(evidence.used) == {"height", "density", "pulses", "roughness", "slope"}
     assert "morphological filter" in evidence.used["height"]
     data = evidence.likelihood.data
     assert np.isfinite(data).mean() > 0.99
@@ -234,3 +234,99 @@ def test_fusa_car_park_aisles_are_found_and_its_roads_kept(lidar_dir):
     # car park's aisles among them
     assert share[on_road].max() < 0.15
     assert length[~on_road & (share >= 0.15)].sum() > 200
+
+
+def test_pulse_dropouts_are_no_road_and_the_edge_of_the_data_is_not_a_dropout(scene_cloud):
+    """Water (or a data gap) returns few of the pulses that reach it: its cells are no road
+    and are marked as dropouts; the cloud's own edge, where the window is half outside the
+    data, is not."""
+    from gisroads.lidar.evidence import EvidenceRule, dropout_cells
+
+    scene, cloud, truth = scene_cloud
+    whole = road_evidence(cloud)
+    x0, y0 = cloud.xyz[:, 0].min(), cloud.xyz[:, 1].min()
+    xy = cloud.xyz[:, :2] - [x0, y0]
+    # a 50 m pond: nine in ten of its points lost (as on Megaplot's ponds), over a road too
+    pond = (np.abs(xy - [150.0, 150.0]) < 25.0).all(axis=1)
+    keep = ~pond | (np.random.default_rng(0).random(len(cloud)) < 0.1)
+    wet = road_evidence(dataclasses.replace(
+        cloud, xyz=cloud.xyz[keep], intensity=cloud.intensity[keep],
+        classification=cloud.classification[keep], return_number=cloud.return_number[keep],
+        number_of_returns=cloud.number_of_returns[keep]), bounds=whole.likelihood.bounds,
+        references=whole.references)
+    assert "pulses" in wet.used
+    grid_y, grid_x = np.mgrid[0:wet.likelihood.shape[0], 0:wet.likelihood.shape[1]]
+    cx = wet.likelihood.transform.c + (grid_x + 0.5) * wet.cell_m - x0
+    cy = wet.likelihood.transform.f - (grid_y + 0.5) * wet.cell_m - y0
+    inner = (np.abs(cx - 150) < 20) & (np.abs(cy - 150) < 20)
+    outer = (np.abs(cx - 150) > 30) | (np.abs(cy - 150) > 30)
+    dropouts = dropout_cells(wet).data
+    measured = np.isfinite(wet.likelihood.data)
+    # measured: every measured cell inside the pond a dropout, none 5 m away from it
+    # measured: 0.89 of the measured cells inside the pond dropouts (nine in ten pulses
+    # lost, a window of 3 pulses: noisy), none 5 m or more away from it
+    assert (dropouts[inner & measured] == 1).mean() > 0.85
+    assert np.nanmax(dropouts[outer]) == 0
+    # no road seeds there (0.8), and hardly a cell the hysteresis could join (0.6): measured
+    # 99th percentile 0.02, largest 0.70
+    assert np.nanmax(wet.likelihood.data[inner]) < 0.8
+    assert np.nanpercentile(wet.likelihood.data[inner], 99) < 0.1
+    road = rasterise(truth, wet.likelihood)
+    np.testing.assert_allclose(wet.likelihood.data[outer & road],
+                               whole.likelihood.data[outer & road], atol=1e-6)
+    # the edge of the data: the pulse density there is the cloud's, not half of it
+    pulses = whole.measures["pulses"].data
+    edge = np.zeros(pulses.shape, bool)
+    edge[:, :2], edge[:, -2:], edge[:2], edge[-2:] = True, True, True, True
+    at_edge = pulses[edge & np.isfinite(pulses)]
+    # measured: at least 0.46 (the ramp's full end is 0.4), median 0.99 as inside
+    assert at_edge.min() > EvidenceRule().pulses[0] and np.median(at_edge) > 0.8
+    assert np.nanmax(dropout_cells(whole).data) == 0
+
+
+def test_a_strip_along_a_pond_is_a_shore_and_a_street_is_not():
+    """The open ground left between a pond and the forest is as wide as a street; the pulse
+    dropouts of the water along one of its flanks tell it apart (beyond the paper)."""
+    import geopandas as gpd
+    import shapely
+    from affine import Affine
+
+    from gisroads.geo import GeoRaster
+    from gisroads.lidar.evidence import SHORE_FLANK_SHARE, flank_share, without_flanked_roads
+
+    cell = 0.5
+    transform = Affine(cell, 0, 0.0, 0, -cell, 100.0)
+    likelihood = np.zeros((200, 200), np.float32)
+    dropouts = np.zeros((200, 200), np.float32)
+    vehicles = np.zeros((200, 200), np.float32)
+    likelihood[20:34, 20:180] = 1.0    # a street, 7 m wide, y 83-90, forest both sides
+    likelihood[120:134, 20:180] = 1.0  # open ground y 33-40 along a pond south of it
+    dropouts[134:200, :] = 1.0          # the pond: y < 33
+    dropouts[170:200, 60:120] = np.nan  # no return at all: unknown, not counted
+    lines = gpd.GeoDataFrame({"width_m": [7.0, 7.0]}, geometry=[
+        shapely.LineString([(12, 86.5), (88, 86.5)]),
+        shapely.LineString([(12, 36.5), (88, 36.5)])])
+    cells = GeoRaster(dropouts, transform, None)
+    share = flank_share(lines, cells)
+    assert share[0] == 0.0
+    assert share[1] > 0.4  # one flank of two: 0.5
+    erased, taken = without_flanked_roads(
+        GeoRaster(likelihood, transform, None), lines,
+        {"car-park aisle": (GeoRaster(vehicles, transform, None), 0.15),
+         "shore": (cells, SHORE_FLANK_SHARE)})
+    assert list(taken["reason"]) == ["shore"]
+    assert taken.geometry.iloc[0].equals(lines.geometry.iloc[1])
+    assert taken["flank_share"].iloc[0] == pytest.approx(share[1])
+    assert (erased.data[20:34, 30:170] == 1).all() and (erased.data[120:134, 30:170] == 0).all()
+
+
+def test_a_forest_plot_with_ponds_gives_no_road_with_the_evidence_cue(lidar_dir):
+    """Issue 10: Megaplot has no road. Its ponds (nine in ten pulses lost, single dark
+    returns classed ground on flat ground) and the open strips along their shores looked
+    like pavement on every other cue: 0.44 km of road before the pulse cue and the shore
+    rule, 22 m after (measured)."""
+    from gisroads.lidar.pipeline import extract_roads
+
+    roads = extract_roads(lidar_dir / "Megaplot.laz", cue="evidence")
+    assert roads.network.centrelines.length.sum() <= 50.0
+    assert "pulses" in roads.cues
