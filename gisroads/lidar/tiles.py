@@ -186,27 +186,29 @@ def stitch_tiles(pieces: list[tuple[Tile, gpd.GeoDataFrame]], *, snap_m: float =
 
 def merge_pieces(lines: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
     """Merge lines that continue each other end to end (at nodes where exactly two ends
-    meet) into single lines; float attributes become length-weighted means, others are
-    taken from the first piece."""
+    meet) into single lines; float attributes become means weighted by the length each
+    piece shares with the merged line, others are taken from the piece that shares the
+    most (the union splits pieces where they cross, so a piece can feed several lines)."""
     geoms = lines.geometry.values
     merged = shapely.get_parts(shapely.line_merge(shapely.union_all(geoms)))
     if len(merged) == 0:
         return lines.iloc[:0]
-    # each input piece belongs to the merged line that contains its midpoint
-    mids = shapely.line_interpolate_point(geoms, 0.5, normalized=True)
-    tree = shapely.STRtree(merged)
-    owner = tree.query_nearest(mids, all_matches=False, return_distance=False)[1]
-    length = shapely.length(geoms)
-    numeric = [c for c in lines.columns if c != lines.geometry.name
-               and pd.api.types.is_float_dtype(lines[c])]
-    weights = np.bincount(owner, weights=length, minlength=len(merged))
-    columns = {c: np.bincount(owner, weights=lines[c].to_numpy(float) * length,
-                              minlength=len(merged)) / np.maximum(weights, 1e-12)
-               for c in numeric}
-    others = [c for c in lines.columns if c != lines.geometry.name and c not in numeric]
-    first = pd.Series(np.arange(len(owner))).groupby(owner).first()
-    for c in others:
-        values = np.empty(len(merged), dtype=object)
-        values[first.index] = lines[c].to_numpy()[first.to_numpy()]
-        columns[c] = values
+    line, piece = shapely.STRtree(geoms).query(merged, predicate="intersects")
+    shared = shapely.length(shapely.intersection(merged[line], geoms[piece]))
+    weights = np.bincount(line, weights=shared, minlength=len(merged))
+    best = pd.DataFrame({"line": line, "piece": piece, "shared": shared}).sort_values(
+        ["line", "shared"], ascending=[True, False], kind="stable").groupby("line").first()
+    source = np.zeros(len(merged), dtype=np.int64)
+    source[best.index.to_numpy()] = best["piece"].to_numpy()
+    columns = {}
+    for c in lines.columns:
+        if c == lines.geometry.name:
+            continue
+        columns[c] = lines[c].to_numpy()[source]
+        if pd.api.types.is_float_dtype(lines[c]):
+            columns[c] = np.where(
+                weights > 0,
+                np.bincount(line, weights=lines[c].to_numpy(float)[piece] * shared,
+                            minlength=len(merged)) / np.maximum(weights, 1e-12),
+                columns[c])
     return gpd.GeoDataFrame(columns, geometry=merged, crs=lines.crs)

@@ -69,3 +69,17 @@ def test_merge_pieces_weights_widths_and_keeps_ids():
     assert len(merged) == 1
     assert merged.width_m.iloc[0] == pytest.approx((6 * 30 + 12 * 10) / 40)
     assert merged.road_id.iloc[0] == 3
+
+
+def test_merge_pieces_gives_every_piece_of_a_crossing_its_attributes():
+    # the union splits both lines at the crossing: four lines, only two hold a midpoint
+    merged = merge_pieces(gpd.GeoDataFrame(
+        {"width_m": [6.0, 9.0], "level": np.array([1, 2], np.int64)},
+        geometry=[shapely.LineString([(-50, 0), (50, 0)]),
+                  shapely.LineString([(0, -50), (0, 50)])], crs="EPSG:32633"))
+    assert len(merged) == 4
+    bounds = shapely.bounds(merged.geometry.values)
+    horizontal = bounds[:, 3] - bounds[:, 1] < 1e-9
+    assert merged.level.dtype == np.int64
+    assert merged.level.tolist() == np.where(horizontal, 1, 2).tolist()
+    assert merged.width_m.tolist() == np.where(horizontal, 6.0, 9.0).tolist()
