@@ -13,8 +13,10 @@ Progress reports the tasks done out of the total and an estimate of the time lef
 from __future__ import annotations
 
 import os
+import pickle
 import time
-from typing import Callable, Sequence
+from pathlib import Path
+from typing import Any, Callable, Sequence
 
 from .progress import Progress, report
 
@@ -145,3 +147,28 @@ def for_each_result(func: Callable, items: Sequence, on_result: Callable, *, wor
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+NOT_KEPT = object()
+
+
+def kept_result(path: Path | None) -> Any:
+    """The result a finished task left at ``path`` in a work folder (:func:`keep_result`),
+    or :data:`NOT_KEPT` when there is none (or no work folder: ``path`` None). The work
+    folder is the user's own, so its pickles are trusted as their own files."""
+    if path is None or not path.exists():
+        return NOT_KEPT
+    with open(path, "rb") as f:
+        return pickle.load(f)
+
+
+def keep_result(path: Path | None, result) -> None:
+    """Write a finished task's result to ``path`` atomically (a temporary file renamed),
+    so a run killed mid-write leaves no half file to resume from; nothing without
+    ``path``."""
+    if path is None:
+        return
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "wb") as f:
+        pickle.dump(result, f, protocol=pickle.HIGHEST_PROTOCOL)
+    os.replace(tmp, path)

@@ -19,8 +19,6 @@ them) out, and the network stage again.
 from __future__ import annotations
 
 import hashlib
-import os
-import pickle
 from dataclasses import dataclass, field, replace
 from functools import lru_cache, partial
 from pathlib import Path
@@ -35,7 +33,7 @@ import shapely
 from ..features.edges import local_energy
 from ..geo import GeoRaster, RoadNetwork
 from ..io.las import PointCloud
-from ..parallel import for_each_result
+from ..parallel import NOT_KEPT, for_each_result, keep_result, kept_result
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.rasters import raster_to_network
@@ -247,9 +245,9 @@ def _run_tile(job: _TileJob, tile: Tile):
     None for a tile with fewer than ``min_points`` points. A finished tile is written to
     ``job.results`` (atomically) and taken from there when it is already there."""
     path = _tile_result_path(job, tile)
-    if path is not None and path.exists():
-        with open(path, "rb") as f:
-            return True, _trimmed(job, pickle.load(f))
+    kept = kept_result(path)
+    if kept is not NOT_KEPT:
+        return True, _trimmed(job, kept)
     cloud = job.store.read(tile)
     result = None
     if cloud is not None and len(cloud) >= job.min_points:
@@ -264,11 +262,7 @@ def _run_tile(job: _TileJob, tile: Tile):
             result = (GeoRaster(bands, raster.transform, raster.crs),
                       evidence.references, evidence.used, evidence.missing)
     del cloud
-    if path is not None:
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        with open(tmp, "wb") as f:
-            pickle.dump(result, f, protocol=pickle.HIGHEST_PROTOCOL)
-        os.replace(tmp, path)
+    keep_result(path, result)
     return False, _trimmed(job, result)
 
 

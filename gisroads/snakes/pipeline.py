@@ -27,6 +27,7 @@ from ..geo import GeoRaster, RoadNetwork
 from ..io.las import cloud_crs, write_classified
 from ..lidar.tagging import ROAD_SURFACE_CLASS
 from ..lidar.tilestore import digest
+from ..parallel import NOT_KEPT, keep_result, kept_result, run_tasks
 from ..progress import Progress, report, scaled
 from ..vectorize.ribbons import ribbon_areas, ribbons_to_network
 from .attractor import ALPHA_ATTR, BETA_ATTR, LANE_M, MIN_NEIGHBOURS, attractor_map
@@ -476,15 +477,12 @@ def fit_patch(job: _PatchJob, road):
     """One road patch as a task: its subcloud from the tile store (the cells along it
     only), its ribbon; ``(ribbon, road point indices or None)``, or None for a patch with
     too few points or samples. Kept in ``job.results`` when given, and taken from there."""
-    import os
-    import pickle
-
     from .subclouds import road_patches
 
     path = _patch_path(job, road)
-    if path is not None and path.exists():
-        with open(path, "rb") as f:
-            return pickle.load(f)
+    kept = kept_result(path)
+    if kept is not NOT_KEPT:
+        return kept
     result = None
     patch = road_patches(road, job.store)[0] if len(road.xyz) >= 2 else None
     if patch is not None and len(patch.points) >= MIN_NEIGHBOURS:
@@ -496,11 +494,7 @@ def fit_patch(job: _PatchJob, road):
             ribbon.attractor = None
         result = (ribbon, indices)
     del patch
-    if path is not None:
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        with open(tmp, "wb") as f:
-            pickle.dump(result, f, protocol=pickle.HIGHEST_PROTOCOL)
-        os.replace(tmp, path)
+    keep_result(path, result)
     return result
 
 
@@ -572,7 +566,6 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
     from pathlib import Path
 
     from ..lidar.tilestore import open_store
-    from ..parallel import run_tasks
 
     lines, working = _map_in_cloud_crs(cloud_path, map_lines)
     store = open_store(cloud_path, work_dir, tile_m=PATCH_CELL_M, overlap_m=0.0,
