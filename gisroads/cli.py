@@ -258,7 +258,7 @@ def add_parallel_options(p, what: str) -> None:
     """--workers, --scheduler and --work-dir: ``what`` (tiles, road patches) as Dask tasks."""
     p.add_argument("--workers", type=int, metavar="N",
                    help=f"{what} in parallel on a local Dask cluster of N worker processes "
-                        "(default: one per core; 1 runs them in this process)")
+                        "(default or 0: one per core; 1 runs them in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help=f"run the {what} on an existing Dask cluster (e.g. "
                         "tcp://host:8786); its workers must see --work-dir")

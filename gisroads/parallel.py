@@ -7,13 +7,18 @@ With ``workers=1`` and no scheduler the items run here, one after another, witho
 ``workers`` single-threaded worker processes, or on the existing cluster at ``scheduler``
 (``tcp://host:8786``): the same job on many machines, with a work folder they all see.
 BLAS and OpenMP pools are pinned to one thread per task (threadpoolctl): a worker per core.
+The local workers start with an interpreter of this process's Python version
+(:func:`worker_python`), also when Python is embedded in an application such as QGIS.
 
 Progress reports the tasks done out of the total and an estimate of the time left.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
+import subprocess
+import sys
 import time
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -45,6 +50,54 @@ def _eta(done: int, total: int, started: float) -> str:
     left = (time.monotonic() - started) / done * (total - done)
     minutes, seconds = divmod(int(round(left)), 60)
     return f", about {minutes}:{seconds:02d} left"
+
+
+def _installation(executable: str) -> str | None:
+    """Version and installation (``sys.base_prefix``) of the interpreter at
+    ``executable``, ``"3.11 /usr"``; None when it does not run."""
+    try:
+        done = subprocess.run(
+            [executable, "-c", "import sys; print('%d.%d' % sys.version_info[:2], "
+                               "sys.base_prefix)"],
+            capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout.strip() if done.returncode == 0 else None
+
+
+def worker_python() -> str:
+    """The interpreter that local worker processes start with: one of this process's
+    Python installation and version.
+
+    ``sys.executable`` when it is one (the command line, a venv). In an application that
+    embeds Python it need not be: QGIS sets it to the first ``python3`` on PATH, which may
+    be another installation (a pyenv build of the same version, whose workers then fail
+    to load the embedded installation's modules), or to QGIS itself. Workers then start
+    with the installation's own ``{sys.base_prefix}/bin/python3.X``. They take this
+    process's ``sys.path`` (multiprocessing's spawn passes it), so they import the same
+    packages.
+    """
+    version = "%d.%d" % sys.version_info[:2]
+    ours = f"{version} {sys.base_prefix}"
+    candidates = [sys.executable, os.path.join(sys.base_prefix, "bin", f"python{version}")]
+    for candidate in filter(None, candidates):
+        if os.access(candidate, os.X_OK) and _installation(candidate) == ours:
+            return candidate
+    raise ValueError(f"no interpreter of this Python ({ours}) found to start Dask workers "
+                     f"with (tried {', '.join(filter(None, candidates))}); use one worker")
+
+
+@contextlib.contextmanager
+def _spawning_with(executable: str):
+    """multiprocessing's spawn (how Dask's nannies start workers) runs ``executable``."""
+    import multiprocessing.spawn as spawn
+
+    before = spawn.get_executable()
+    spawn.set_executable(executable)
+    try:
+        yield
+    finally:
+        spawn.set_executable(before)
 
 
 def progress_message(done: int, total: int, started: float, what: str = "tiles") -> str:
@@ -106,24 +159,29 @@ def for_each_result(func: Callable, items: Sequence, on_result: Callable, *, wor
                          "(pip install 'dask[distributed]', or Debian's python3-distributed);"
                          " use one worker") from None
 
-    cluster = None
-    if scheduler is None:
-        import dask
+    with contextlib.ExitStack() as stack:
+        if scheduler is None:
+            import dask
 
-        # Dask sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which makes glibc return
-        # every freed block over 64 KiB to the system: the tiles' numpy temporaries then
-        # cost 1.7x the CPU seconds they take in this process (measured, 6 tiles: 10.4 s
-        # against 6.1 s). The workers keep the other variables (one BLAS/OpenMP thread).
-        environ = {k: v for k, v in (dask.config.get("distributed.nanny.pre-spawn-environ",
-                                                     None) or {}).items()
-                   if k != "MALLOC_TRIM_THRESHOLD_"}
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
-            cluster = LocalCluster(n_workers=min(workers, len(items)), threads_per_worker=1,
-                                   processes=True, dashboard_address=":0")
-        client = Client(cluster)
-    else:
-        client = Client(scheduler)
-    try:
+            # Dask sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which makes glibc return
+            # every freed block over 64 KiB to the system: the tiles' numpy temporaries then
+            # cost 1.7x the CPU seconds they take in this process (measured, 6 tiles: 10.4 s
+            # against 6.1 s). The workers keep the other variables (one BLAS/OpenMP thread).
+            environ = {k: v for k, v in (dask.config.get("distributed.nanny.pre-spawn-environ",
+                                                         None) or {}).items()
+                       if k != "MALLOC_TRIM_THRESHOLD_"}
+            stack.enter_context(dask.config.set(
+                {"distributed.nanny.pre-spawn-environ": environ}))
+            # for the cluster's lifetime: a nanny restarts a lost worker the same way
+            stack.enter_context(_spawning_with(worker_python()))
+            cluster = stack.enter_context(LocalCluster(
+                n_workers=min(workers, len(items)), threads_per_worker=1, processes=True,
+                dashboard_address=":0"))
+            client = stack.enter_context(Client(cluster))
+        else:
+            client = stack.enter_context(Client(scheduler))
+        report(progress, 0.0, f"{len(items)} {what} on "
+                              f"{len(client.scheduler_info()['workers'])} Dask workers")
         live = {}
         for i, item in enumerate(items):
             future = client.submit(single_threaded, func, item, pure=False)
@@ -143,10 +201,6 @@ def for_each_result(func: Callable, items: Sequence, on_result: Callable, *, wor
         except BaseException:
             client.cancel([f for _, f in live.values()])
             raise
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
 NOT_KEPT = object()

@@ -22,6 +22,8 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
                        QgsProcessingProvider, QgsSettings)
 
+from .algorithms.base import workers_parameter
+
 SETTING = "gisroads/executable"
 
 
@@ -127,9 +129,11 @@ class ExternalLidarRoadNetwork(QgsProcessingAlgorithm):
             (QgsProcessingParameterFileDestination("OUTPUT", "Road network",
                                                    "GeoPackage (*.gpkg)"),
              "GeoPackage receiving every layer, in the cloud's CRS"),
+            (workers_parameter(str, "tiles"), None),
         ]
         for parameter, text in params:
-            parameter.setHelp(text)
+            if text is not None:
+                parameter.setHelp(text)
             self.addParameter(parameter)
         for name, text in (("ROADS", "number of roads"), ("LENGTH_M", "total road length"),
                            ("JUNCTIONS", "number of junctions")):
@@ -140,7 +144,8 @@ class ExternalLidarRoadNetwork(QgsProcessingAlgorithm):
         cue = self.CUES[self.parameterAsEnum(parameters, "CUE", context)]
         result = run_external(self.executable, [
             "lidar", self.parameterAsFile(parameters, "INPUT", context), "-o", out,
-            "--cue", cue, "--workers", "1"], feedback)
+            "--cue", cue,
+            "--workers", str(self.parameterAsInt(parameters, "WORKERS", context))], feedback)
         feedback.pushInfo(f"{result['roads']} roads, {result['length_m']:.0f} m, "
                           f"{result['junctions']} junctions")
         return {"OUTPUT": out, "ROADS": result["roads"], "LENGTH_M": result["length_m"],

@@ -124,6 +124,17 @@ def road_map_input(tr) -> QgsProcessingParameterFeatureSource:
     return param
 
 
+def workers_parameter(tr, what: str) -> QgsProcessingParameterNumber:
+    """The parameter ``WORKERS``: ``what`` (tiles, road patches) as parallel tasks; 0, the
+    default, is one worker per core."""
+    param = QgsProcessingParameterNumber("WORKERS", tr("Parallel workers"),
+                                         QgsProcessingParameterNumber.Integer, 0, minValue=0)
+    param.setHelp(tr(f"the {what} run as tasks on this many worker processes started beside "
+                     f"QGIS (Dask), each with one {what.rstrip('s')} in memory at a time; 0: "
+                     "one per core; 1: one after another inside QGIS"))
+    return param
+
+
 def network_output(tr, text: str) -> QgsProcessingParameterFileDestination:
     """The road-network GeoPackage parameter ``OUTPUT``."""
     param = QgsProcessingParameterFileDestination("OUTPUT", tr("Road network"),

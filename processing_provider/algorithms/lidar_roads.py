@@ -6,9 +6,10 @@ from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterFileDes
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import lidar_job, parse_metres, stage_default
 from gisroads.lidar.pipeline import CUES, DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, EVIDENCE_THRESHOLD
+from gisroads.parallel import default_workers
 
 from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
-from .base import GisroadsAlgorithm, cloud_input, network_output
+from .base import GisroadsAlgorithm, cloud_input, network_output, workers_parameter
 
 
 class LidarRoadNetwork(GisroadsAlgorithm):
@@ -22,8 +23,8 @@ class LidarRoadNetwork(GisroadsAlgorithm):
         "local-energy edges and a normalized-cut segmentation, rectangle road hypotheses "
         "scored by boundary and interior filters, likelihood maps per road width, and a "
         "minimum cover that picks the fewest rectangles explaining them.</p>"
-        "<p>The cloud is processed in overlapping tiles; roads are joined across tile "
-        "seams. Output: a GeoPackage in the cloud's CRS with road_centrelines (width_m), "
+        "<p>The cloud is read once into overlapping tiles, which run in parallel (one "
+        "worker process per core by default); roads are joined across tile seams. Output: a GeoPackage in the cloud's CRS with road_centrelines (width_m), "
         "road_polygons, junctions and the QA layers rectangles (selected) and hypotheses "
         "(all valid windows).</p>"
         "<p>With the <i>evidence</i> cue (beyond the paper) the road likelihood of every cue "
@@ -57,7 +58,7 @@ class LidarRoadNetwork(GisroadsAlgorithm):
                                           lengths), "comma-separated (paper: 40-300 m)"),
             (QgsProcessingParameterNumber("TILE", self.tr("Tile side (metres)"), double,
                                           stage_default(lidar_job, "tile_m"), minValue=50.0),
-             "tiles are processed one at a time (paper: 300 m)"),
+             "the cloud is processed in tiles of this side (paper: 300 m)"),
             (QgsProcessingParameterNumber("OVERLAP", self.tr("Tile overlap (metres)"), double,
                                           stage_default(lidar_job, "overlap_m"), minValue=0.0),
              "overlap with each neighbouring tile (paper: 100 m)"),
@@ -66,6 +67,7 @@ class LidarRoadNetwork(GisroadsAlgorithm):
                                           stage_default(lidar_job, "n_segments"),
                                           minValue=10, maxValue=1000),
              "over-segmentation size (paper: 100-200)"),
+            (workers_parameter(self.tr, "tiles"), None),
             (network_output(self.tr, "GeoPackage receiving every layer, in the cloud's CRS"), None),
             (QgsProcessingParameterFileDestination("TAGGED_LAS",
                                                    self.tr("Cloud with road points (class 11)"),
@@ -97,7 +99,8 @@ class LidarRoadNetwork(GisroadsAlgorithm):
                                        "lengths"),
                 tile_m=self.parameterAsDouble(parameters, "TILE", context),
                 overlap_m=self.parameterAsDouble(parameters, "OVERLAP", context),
-                n_segments=self.parameterAsInt(parameters, "SEGMENTS", context))
+                n_segments=self.parameterAsInt(parameters, "SEGMENTS", context),
+                workers=self.parameterAsInt(parameters, "WORKERS", context) or default_workers())
         qa = (("hypotheses", "rectangles") if result["cue"] == "intensity"
               else ("rejected", "gap_edges", "junction_connections"))
         load_geopackage_on_completion(context, out, (*qa, POLYGONS, CENTRELINES, JUNCTIONS),

@@ -4,9 +4,10 @@ from qgis.core import (QgsProcessingParameterFileDestination,
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import snakes_job
+from gisroads.parallel import default_workers
 
 from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
-from .base import GisroadsAlgorithm, network_output
+from .base import GisroadsAlgorithm, network_output, workers_parameter
 from .curb_attractor import map_guided_arguments, map_guided_parameters
 
 
@@ -42,6 +43,7 @@ class RibbonSnakeRoads(GisroadsAlgorithm):
             (QgsProcessingParameterRasterDestination("ATTRACTOR", self.tr("Attractor map"),
                                                      optional=True, createByDefault=False),
              "optional: the attractor maps of the road patches as one GeoTIFF, for QA"),
+            (workers_parameter(self.tr, "road patches"), None),
         ]
         self.add_parameters(params)
         self.add_network_outputs()
@@ -52,8 +54,10 @@ class RibbonSnakeRoads(GisroadsAlgorithm):
         attractor = self.parameterAsOutputLayer(parameters, "ATTRACTOR", context) or None
         cloud, lines, options = map_guided_arguments(self, parameters, context, feedback)
         with gisroads_errors(feedback):
-            result = snakes_job(cloud, lines, out, tagged_las=tagged, attractor_tif=attractor,
-                                progress=progress_callback(feedback), **options)
+            result = snakes_job(
+                cloud, lines, out, tagged_las=tagged, attractor_tif=attractor,
+                workers=self.parameterAsInt(parameters, "WORKERS", context) or default_workers(),
+                progress=progress_callback(feedback), **options)
         load_geopackage_on_completion(context, out, ("ribbon_patches", POLYGONS, CENTRELINES,
                                                      JUNCTIONS), group="roads")
         return {"OUTPUT": out, "TAGGED_LAS": tagged, "ATTRACTOR": attractor,

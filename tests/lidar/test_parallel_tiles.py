@@ -1,7 +1,9 @@
 """Tiles as tasks on Dask (issue 12, item 2): the same network whatever the number of
 workers, on a local cluster or on a real scheduler and worker started here on loopback."""
 import json
+import os
 import subprocess
+import sys
 import time
 
 import numpy as np
@@ -9,7 +11,7 @@ import pytest
 
 from gisroads.io.vector import read_layer
 from gisroads.lidar.pipeline import extract_roads
-from gisroads.parallel import progress_message, run_tasks
+from gisroads.parallel import progress_message, run_tasks, worker_python
 from tests.lidar.tile_runs import ENV, GISROADS, assert_same_geometries
 
 
@@ -28,6 +30,25 @@ def test_results_come_back_in_the_items_order_here_and_on_dask():
     assert seen[-1].startswith("7 of 7 tiles done")
     assert run_tasks(_square, items, workers=2) == [x * x for x in items]
     assert progress_message(1, 4, time.monotonic() - 10).endswith("about 0:30 left")
+
+
+def test_workers_start_with_this_installation_when_sys_executable_is_another(monkeypatch,
+                                                                            tmp_path):
+    """As inside QGIS, whose sys.executable is the first python3 on PATH or QGIS itself."""
+    assert worker_python() == sys.executable
+    foreign = tmp_path / "python3"
+    foreign.write_text("#!/bin/sh\necho 3.11 /opt/other-python\n")
+    foreign.chmod(0o755)
+    monkeypatch.setattr(sys, "executable", str(foreign))
+    version = "%d.%d" % sys.version_info[:2]
+    assert worker_python() == os.path.join(sys.base_prefix, "bin", f"python{version}")
+    seen = []
+    assert run_tasks(_square, [1, 2, 3], workers=2, progress=lambda f, m: seen.append(m)) \
+        == [1, 4, 9]
+    assert seen[0] == "3 tiles on 2 Dask workers"
+    monkeypatch.setattr(sys, "base_prefix", str(tmp_path))
+    with pytest.raises(ValueError, match="no interpreter of this Python"):
+        worker_python()
 
 
 def test_two_workers_give_the_network_of_one(tiled_cloud, tiled_network):
