@@ -2,11 +2,12 @@
 from pathlib import Path
 
 import geopandas as gpd
+import psutil
 import pytest
 import shapely
 from qgis.core import QgsProcessingException, QgsProcessingFeedback, QgsVectorLayer, QgsWkbTypes
 
-from gisroads.synthetic import make_scene
+from gisroads.synthetic import make_scene, write_cloud
 from gisroads.synthetic.image import write_image
 from processing_provider.convert import source_to_frame, to_pyproj, to_qgis
 
@@ -32,6 +33,35 @@ def test_cancel_while_writing_the_cloud_leaves_no_partial_file(run_algorithm, tm
              "OUTPUT_FOLDER": str(tmp_path / "out")}, feedback)
     # truth.gpkg is complete before the cloud starts; the cloud is absent, not partial
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["truth.gpkg"]
+
+
+def test_cancel_while_tiles_run_on_dask_workers_stops_them_and_writes_nothing(
+        run_algorithm, tmp_path):
+    scene = make_scene(seed=3, size_m=(300.0, 300.0))
+    write_cloud(scene, tmp_path / "cloud.laz", density_per_m2=2.0, seed=3)
+    class CancelAfterFirstTile(QgsProcessingFeedback):
+        texts = []
+
+        def setProgressText(self, text):  # noqa: N802
+            self.texts.append(text)
+            if text.startswith("1 of "):
+                self.cancel()
+            super().setProgressText(text)
+    feedback = CancelAfterFirstTile()
+    texts = feedback.texts
+    children_before = set(psutil.Process().children(recursive=True))
+    with pytest.raises(QgsProcessingException, match="cancelled"):
+        run_algorithm("lidarroadnetwork", {"INPUT": str(tmp_path / "cloud.laz"), "TILE": 150,
+                                           "OVERLAP": 50, "WORKERS": 2,
+                                           "OUTPUT": str(tmp_path / "roads.gpkg")}, feedback)
+    assert "9 tiles on 2 Dask workers" in texts
+    assert not any(t.startswith("2 of ") for t in texts)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cloud.laz"]
+    # the local cluster is closed: its worker processes are gone (multiprocessing's
+    # resource tracker stays for the life of this process, as it does for any spawn)
+    _, alive = psutil.wait_procs(
+        set(psutil.Process().children(recursive=True)) - children_before, timeout=30)
+    assert [p for p in alive if "resource_tracker" not in " ".join(p.cmdline())] == []
 
 
 def test_cancel_during_the_imagery_pipeline_leaves_no_output(run_algorithm, tmp_path):
