@@ -74,7 +74,7 @@ def test_likelihood_separates_the_roads_of_a_synthetic_scene(scene_cloud):
     # measured 0.948
     assert auc_against(evidence, truth) > 0.92
     assert set(evidence.used) == {"height", "density", "pulses", "roughness", "slope",
-                                  "intensity", "returns", "classification"}
+                                  "intensity", "returns", "classification", "kerbs"}
     assert evidence.missing == {}
     for name, member in evidence.memberships.items():
         assert member.shape == evidence.likelihood.shape, name
@@ -105,7 +105,8 @@ def test_a_cloud_without_intensity_returns_or_classes_still_works(scene_cloud):
                       np.ones(n, np.uint8), cloud.crs, cloud.source_crs)
     evidence = road_evidence(bare)
     assert set(evidence.missing) == {"intensity", "returns", "classification"}
-    assert set(evidence.used) == {"height", "density", "pulses", "roughness", "slope"}
+    assert set(evidence.used) == {"height", "density", "pulses", "roughness", "slope",
+                                  "kerbs"}
     assert "morphological filter" in evidence.used["height"]
     data = evidence.likelihood.data
     assert np.isfinite(data).mean() > 0.99
