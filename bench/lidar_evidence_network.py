@@ -15,6 +15,29 @@ pulses/m2 against their exact truth.
 
 ``--rectangles`` adds the variant confirmed by the paper's rectangle cover (runs the
 paper's pipeline on every file, about 90 s). Not wired into bench/run.py.
+
+Kerb rules (issue 10, ``kerb_*``, :func:`kerb_variant` on top of ``recommended``), measured
+on the likelihood before ``road_evidence`` had its ``kerbs`` cue (fusa C / K / Ks /
+junctions; synthetic grid and every-feature scene C / K; the IGN tile's 1.9 m cells are left
+alone, zurich, crop_1 and the extra-bytes file stay at 0 km in every variant):
+
+=====================  ==========================  ============  ============
+variant                fusa                        syn_grid      syn_full
+=====================  ==========================  ============  ============
+recommended            0.799 / 0.593 / 0.693 / 5   0.989 / 1.0   0.982 / 0.940
+kerb_sidewalks         0.802 / 0.647 / 0.723 / 5   0.989 / 1.0   0.891 / 0.949
+kerb_sidewalks_beside  0.803 / 0.631 / 0.705 / 5   0.991 / 1.0   0.889 / 0.946
+kerb_sidewalks_long    0.802 / 0.596 / 0.696 / 5   0.989 / 1.0   0.982 / 0.940
+kerb_medians           0.805 / 0.599 / 0.695 / 6   0.973 / 1.0   0.983 / 0.963
+kerb_medians_6m        0.810 / 0.599 / 0.697 / 5   0.989 / 1.0   0.982 / 0.940
+kerb_islands           0.787 / 0.587 / 0.688 / 4   0.989 / 1.0   0.982 / 0.940
+=====================  ==========================  ============  ============
+
+The sidewalk cuts take the foot of the synthetic overpass's ramp (its edges are steps, the
+ramp narrows, and the band across it is cut: the ramp's road is lost); ``kerb_medians``
+without a length floor cuts 1-4 cell notches of the grid's carriageway edges (a junction
+lost); from a 4 m floor on the grid is whole again, and a car's length (5 m) became the
+``kerbs`` cue of ``road_evidence`` (fusa 0.810 / 0.599, 5 of 7 through the pipeline).
 """
 from __future__ import annotations
 
@@ -34,7 +57,8 @@ from gisroads.evaluate.buffer import buffer_metrics
 from gisroads.evaluate.topology import junction_metrics
 from gisroads.geo import GeoRaster
 from gisroads.io.las import concatenate, read_las
-from gisroads.lidar.evidence import (EvidenceRule, _cell_min, _ratio, _smooth, road_evidence,
+from gisroads.lidar.evidence import (KERB_GRADIENT, LANE_RADIUS_M, EvidenceRule, _cell_min,
+                                     _disk, kerb_steps, median_cells, road_evidence,
                                      vehicle_cells, without_car_park_aisles)
 from gisroads.network.rasters import raster_to_network
 
@@ -45,14 +69,11 @@ REAL = {"fusa": "fusa", "IGN": "test_semis_2023_0292_6833_LA93_IGN69", "zurich":
         "xbytes": "las_with_several_extra_byte_bloc"}
 SYNTHETIC = {"syn_grid": {"features": ("buildings", "trees")}, "syn_full": {}}
 OLD_RULE = EvidenceRule(intensity=(0.3, 0.8))
-#: Kerb cut (experiment): a kerb step of h metres smoothed at sigma 0.5 m peaks at
-#: h / (0.5 sqrt(2 pi)) rise over run; 0.06 is a 7.5 cm step.
-KERB_GRADIENT = 0.06
 
 
 def ground_step(cloud, evidence, sigma_m: float = 0.5, trend_m: float = 3.0) -> np.ndarray:
-    """Gradient magnitude of the lowest ground returns smoothed at ``sigma_m`` minus their
-    trend at ``trend_m`` (a steady slope gives 0, a kerb a ridge); NaN far from ground."""
+    """:func:`gisroads.lidar.evidence.kerb_steps` of the lowest returns within 0.25 m of the
+    terrain (the ``kerbs`` cue takes the ground returns); NaN far from them."""
     lik = evidence.likelihood
     t, (rows, cols), cell = lik.transform, lik.shape, evidence.cell_m
     x, y, z = np.asarray(cloud.xyz, float).T
@@ -61,17 +82,7 @@ def ground_step(cloud, evidence, sigma_m: float = 0.5, trend_m: float = 3.0) -> 
     ok = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
     lowest = _cell_min((row * cols + col)[ok], z[ok], rows * cols).reshape(rows, cols)
     ground = np.where(evidence.measures["height"].data <= 0.25, lowest, np.nan)
-    known = np.isfinite(ground)
-    z0 = np.where(known, ground, 0.0)
-
-    def smooth(s):
-        return _ratio(_smooth(z0, s / cell), _smooth(known.astype(float), s / cell))
-
-    s = max(sigma_m, cell)
-    gy, gx = np.gradient(smooth(s) - smooth(trend_m), cell)
-    step = np.hypot(gx, gy)
-    step[~(_smooth(known.astype(float), s / cell) > 0.3)] = np.nan
-    return step
+    return kerb_steps(ground, cell, sigma_m=sigma_m, trend_m=trend_m)
 
 
 def kerb_cut(cloud, evidence, likelihood: GeoRaster) -> GeoRaster:
@@ -82,6 +93,72 @@ def kerb_cut(cloud, evidence, likelihood: GeoRaster) -> GeoRaster:
     kerb = ndimage.binary_dilation(np.nan_to_num(ground_step(cloud, evidence)) >= KERB_GRADIENT)
     data = np.array(likelihood.data, np.float32)
     data[kerb & np.isfinite(data)] = 0.0
+    return GeoRaster(data, likelihood.transform, likelihood.crs, nodata=np.nan)
+
+
+def _extent_m(labels: np.ndarray, count: int, cell_m: float) -> np.ndarray:
+    """Per label (0 included, as 0), the diagonal of its bounding box, metres."""
+    boxes = ndimage.find_objects(labels, count)
+    return np.array([0.0] + [np.hypot(b[0].stop - b[0].start, b[1].stop - b[1].start) * cell_m
+                             for b in boxes])
+
+
+def kerb_parts(cloud, evidence, low: float = 0.6):
+    """``(paved, kerb, carriageway, corridor)`` masks: paved cells, kerb steps
+    (:func:`ground_step` >= :data:`KERB_GRADIENT`), the paved cells a lane-wide disk fits in
+    once the kerbs are out, and the same without taking the kerbs out."""
+    paved = np.nan_to_num(evidence.likelihood.data) >= low
+    kerb = np.nan_to_num(ground_step(cloud, evidence)) >= KERB_GRADIENT
+    disk = _disk(LANE_RADIUS_M / evidence.cell_m)
+    return (paved, kerb, ndimage.binary_opening(paved & ~kerb, disk),
+            ndimage.binary_opening(paved, disk))
+
+
+def kerb_variant(cloud, evidence, kind: str, *, min_length_m: float = 0.0) -> GeoRaster:
+    """The likelihood with the cells a kerb rule takes for no carriageway set to 0 (clouds
+    with cells over 1 m cannot resolve a kerb and are left alone).
+
+    ``sidewalks``: paved cells of a wide corridor outside its kerb-free carriageway parts
+    (the strips beyond a kerb and the kerbs); ``sidewalks_beside``: only those strips within
+    3.5 m of a carriageway part, and the kerb cells along them; ``sidewalks_long``: only the
+    strips at least 8 m long and at most 3 m wide on average (a sidewalk, not a band across a
+    road where it narrows); ``medians``: paved cells a 2 m closing of the carriageway parts
+    spans (between two carriageways), those at least ``min_length_m`` long; ``islands``:
+    enclosed holes of the carriageway parts larger than the network stage fills (50 m2)
+    holding a kerb step.
+    """
+    likelihood = evidence.likelihood
+    if evidence.cell_m > 1.0:
+        return likelihood
+    data = np.array(likelihood.data, np.float32)
+    cell = evidence.cell_m
+    paved, kerb, carriageway, corridor = kerb_parts(cloud, evidence)
+    if kind.startswith("sidewalks"):
+        cut = paved & corridor & ~carriageway
+        if kind != "sidewalks":
+            near = ndimage.distance_transform_edt(~carriageway) * cell <= 3.5
+            strips = cut & ~kerb & near
+            if kind == "sidewalks_long":
+                labels, count = ndimage.label(strips, np.ones((3, 3)))
+                extent = _extent_m(labels, count, cell)
+                area = np.bincount(labels.ravel(), minlength=count + 1) * cell ** 2
+                long = (extent >= 8.0) & (area <= 3.0 * extent)
+                long[0] = False
+                strips = long[labels]
+            cut = strips | (kerb & paved & near & ndimage.binary_dilation(strips))
+    elif kind == "medians":
+        cut = median_cells(paved, kerb, cell, min_length_m=min_length_m)
+    elif kind == "islands":
+        labels, count = ndimage.label(~carriageway)
+        edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+        hole = np.bincount(labels.ravel(), minlength=count + 1) * cell ** 2 > 50.0
+        hole &= np.bincount(labels.ravel(), weights=kerb.ravel(), minlength=count + 1) > 0
+        hole[edge] = False
+        hole[0] = False
+        cut = hole[labels]
+    else:
+        raise ValueError(f"unknown kerb variant {kind!r}")
+    data[cut & np.isfinite(data)] = 0.0
     return GeoRaster(data, likelihood.transform, likelihood.crs, nodata=np.nan)
 
 
@@ -146,6 +223,13 @@ VARIANTS = {
                                                  aisles=True)),
     "hyst0.5": (EvidenceRule(), "ramp (0.3, 0.6), hysteresis 0.8 / 0.5, aisles out",
                 lambda c, e, x: network(e.likelihood, e, low=0.5, aisles=True)),
+    **{f"kerb_{kind}{suffix}": (
+        EvidenceRule(), f"recommended, kerb rule {kind}{suffix.replace('_', ' ')}",
+        lambda c, e, x, kind=kind, length=length: network(
+            kerb_variant(c, e, kind, min_length_m=length), e, low=0.6, aisles=True))
+       for kind, suffix, length in (
+           ("sidewalks", "", 0.0), ("sidewalks_beside", "", 0.0), ("sidewalks_long", "", 0.0),
+           ("medians", "", 0.0), ("medians", "_6m", 6.0), ("islands", "", 0.0))},
     "confirmed": (OLD_RULE, "ramp (0.3, 0.8), threshold 0.8, roads confirmed by the paper's "
                             "rectangles", lambda c, e, x: confirmed(e.likelihood, e, x)),
 }
