@@ -127,27 +127,95 @@ def write_geopackage(path, layers: dict[str, gpd.GeoDataFrame], *,
     -------
     Path
     """
-    path = Path(path)
-    if path.suffix.lower() != ".gpkg":
-        raise ValueError(f"{path}: a GeoPackage path must end in .gpkg")
+    writer = GeoPackageWriter(path, styles_dir=styles_dir)
     if not layers:
         raise ValueError("write_geopackage needs at least one layer")
-    with atomic_path(path) as tmp:
+    with writer as gpkg:
+        for name, frame in layers.items():
+            gpkg.write(name, frame)
+    return writer.path
+
+
+class GeoPackageWriter:
+    """A GeoPackage written layer by layer and, for layers too large to hold, part by part
+    (:meth:`append`), atomically and with its QGIS styles, as :func:`write_geopackage`.
+
+    Use as a context manager: the file appears at ``path`` when the block ends without an
+    exception, with every layer written; on an exception nothing is left.
+
+    Parameters
+    ----------
+    path : str or Path
+        Target ``.gpkg``; replaced whole if it exists.
+    styles_dir : Path
+        Folder of ``<layer>.qml`` styles.
+    """
+
+    def __init__(self, path, *, styles_dir: Path = STYLES_DIR):
+        self.path = Path(path)
+        if self.path.suffix.lower() != ".gpkg":
+            raise ValueError(f"{self.path}: a GeoPackage path must end in .gpkg")
+        self.styles_dir = styles_dir
+        self._written: dict[str, int] = {}  # layer -> features
+        self._empty: dict[str, gpd.GeoDataFrame] = {}  # appended-to layers with no feature yet
+        self._atomic = None
+        self._tmp: Path | None = None
+
+    def __enter__(self) -> "GeoPackageWriter":
+        self._atomic = atomic_path(self.path)
+        self._tmp = self._atomic.__enter__()
+        return self
+
+    def write(self, name: str, frame: gpd.GeoDataFrame) -> None:
+        """Write the whole layer ``name`` (an empty frame gives an empty layer)."""
+        if name in self._written:
+            raise ValueError(f"layer {name!r} is already written")
+        self._to_file(name, frame, "w")
+
+    def append(self, name: str, frame: gpd.GeoDataFrame) -> None:
+        """Add ``frame``'s features at the end of layer ``name``, which the first frame
+        with features creates (its columns and types are the layer's). An empty frame adds
+        nothing; a layer that only ever got empty frames is written empty, with the
+        schema of the first, when the writer closes."""
+        if len(frame) == 0:
+            if name not in self._written:
+                self._empty.setdefault(name, frame)
+            return
+        self._empty.pop(name, None)
+        self._to_file(name, frame, "a" if name in self._written else "w")
+
+    def _to_file(self, name: str, frame: gpd.GeoDataFrame, mode: str) -> None:
         with warnings.catch_warnings():
             # geopandas' Fiona writer warns that an empty frame may fail: it is intended here
             warnings.filterwarnings("ignore", "You are attempting to write an empty DataFrame")
-            for name, frame in layers.items():
-                # GeoPackage 1.2, as Debian's GDAL 3.6 (QGIS 3.22) writes: newer GDALs write
-                # 1.4, which it opens with a warning per layer
-                frame.to_file(tmp, layer=name, driver="GPKG", VERSION="1.2")
-        empty_types = {n: kind for n, frame in layers.items() if len(frame) == 0
-                       and (kind := declared_geometry_type(n, styles_dir)) is not None}
+            # GeoPackage 1.2, as Debian's GDAL 3.6 (QGIS 3.22) writes: newer GDALs write
+            # 1.4, which it opens with a warning per layer
+            frame.to_file(self._tmp, layer=name, driver="GPKG", mode=mode, VERSION="1.2")
+        self._written[name] = self._written.get(name, 0) + len(frame)
+
+    def __exit__(self, kind, error, traceback) -> bool:
+        if kind is None:
+            try:
+                for name, frame in list(self._empty.items()):
+                    self._to_file(name, frame, "w")
+                self._finish()
+            except BaseException as failed:  # the temporary file goes, the target stays
+                self._atomic.__exit__(type(failed), failed, failed.__traceback__)
+                raise
+        return bool(self._atomic.__exit__(kind, error, traceback))
+
+    def _finish(self) -> None:
+        """The geometry types of empty layers and the styles, once every layer is in."""
+        if not self._written:
+            raise ValueError("a GeoPackage needs at least one layer")
+        empty_types = {n: kind for n, count in self._written.items() if count == 0
+                       and (kind := declared_geometry_type(n, self.styles_dir)) is not None}
         if empty_types:
-            _declare_geometry_types(tmp, empty_types)
-        styles = {n: q for n in layers if (q := style_for(n, styles_dir)) is not None}
+            _declare_geometry_types(self._tmp, empty_types)
+        styles = {n: q for n in self._written if (q := style_for(n, self.styles_dir))
+                  is not None}
         if styles:
-            _store_styles(tmp, styles)
-    return path
+            _store_styles(self._tmp, styles)
 
 
 def read_layer(path, layer: str | None = None, *, crs=None) -> gpd.GeoDataFrame:
