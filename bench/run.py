@@ -361,8 +361,9 @@ def _imagery_paths(record):
 
     import shapely
 
-    from gisroads.imagery.pipeline import PROBABILITY_METHOD, extract_image_roads
-    from gisroads.learn import adapt_to_image, load_model, predict_probability
+    from gisroads.imagery.pipeline import (PROBABILITY_METHOD, extract_image_roads,
+                                           road_probability)
+    from gisroads.learn import load_model, predict_probability
     from gisroads.learn.scores import pixel_auc
 
     # Massachusetts declares its white fill as no-data, as a user gives it to the model
@@ -370,8 +371,7 @@ def _imagery_paths(record):
                    else record.image)
     model = load_model()
     probability, plain_s = _timed(predict_probability, model_image, model)
-    adapted, adapted_s = _timed(lambda: predict_probability(
-        model_image, adapt_to_image(model_image, model)))
+    adapted, adapted_s = _timed(road_probability, model_image, model)
     valid = _burn_shapes([record.valid_area], record.image)
     if record.truth_mask is not None:
         road = np.asarray(record.truth_mask.data, bool)

@@ -81,3 +81,23 @@ def test_elongated_keeps_road_shaped_parts():
     kept = elongated(mask, 0.5)
     assert kept[20:28, 10:190].all() and not kept[100:160, 100:160].any()
     assert not kept[180:184, 10:30].any()
+
+
+def test_adaptation_takes_road_samples_only_where_road_like(scene_image, scene_model):
+    """``road_like`` filters the road samples; without enough of them (no grey surface)
+    the model is kept as it is; a mask off the image grid is refused."""
+    scene, image = scene_image
+    surface = _burn(shapely.buffer(scene.roads.geometry.values,
+                                   scene.roads.width_m.to_numpy() / 2), image)
+    kwargs = dict(samples=6000, max_iter=20)
+    filtered = adapt_to_image(image, scene_model, road_like=surface, **kwargs)
+    assert filtered.metadata["blend"]["second"]["road_like"] is True
+    assert filtered.metadata["blend"]["weight"] == 0.75
+    assert adapt_to_image(image, scene_model, road_like=np.zeros(image.shape, bool),
+                          **kwargs) is scene_model
+    # the filter decides the road samples: off the surface they make another model
+    off = adapt_to_image(image, scene_model, road_like=~surface, **kwargs)
+    assert not np.array_equal(predict_probability(image, off).data,
+                              predict_probability(image, filtered).data, equal_nan=True)
+    with pytest.raises(ValueError, match="image grid"):
+        adapt_to_image(image, scene_model, road_like=surface[:-1], **kwargs)
