@@ -8,6 +8,9 @@ Below the methods and above the vectorisers, so no method imports another:
 :mod:`gisroads.network.junctions`
     Road strings to a network: approximation, duplicates, junction construction and
     significance (Sec. 2.3).
+:mod:`gisroads.network.cuts`
+    Cuts across roads closed in a road mask before its skeleton: two road ends of the same
+    width facing each other across open ground.
 :mod:`gisroads.network.rasters`
     Any road raster (a mask or a probability map) to road parts and, through the two stages
     above, to the network contract.

@@ -12,8 +12,12 @@ road evidence or the imagery road cue of this project. The stages, each callable
     noise and small blobs outside the roads).
 :func:`skeleton_parts`
     Tile by tile (``tile_px`` with ``overlap_px`` of context, the cores stitched exactly
-    as the LiDAR tiles are), the mask's skeleton with the width at every skeleton pixel
-    from the distance transform; then, on the whole network of vectors: spurs pruned
+    as the LiDAR tiles are), cuts across roads closed in the mask (two road ends of the
+    same width facing each other across open ground, up to ``max_cut_m``:
+    :func:`gisroads.network.cuts.bridge_cuts`; a piece between two cuts of a wide road is
+    shorter than wide and its own skeleton would run across the road), the mask's
+    skeleton with the width at every skeleton pixel from the distance transform; then, on
+    the whole network of vectors: spurs pruned
     (end branches shorter than the local half width plus ``spur_m``: the skeleton's twigs
     towards corners and bumps of the border), junction pixel clusters contracted into one
     node (junctions joined by less than ``junction_merge_m``), the last ``straighten``
@@ -53,6 +57,7 @@ from ..geo import GeoRaster, RoadNetwork, _apply
 from ..progress import Progress, report, scaled
 from ..vectorize.ribbons import node_roads
 from ..vectorize.skeleton import skeleton_lines
+from .cuts import MAX_CUT_M, bridge_cuts
 from .junctions import merge_close_junctions, strings_to_network
 from .subgraph import edge_weights, gap_edges, road_strings, select_gap_edges
 
@@ -280,7 +285,7 @@ def _stitch_seams(lines, seams, tolerance_m: float):
 
 
 def _raw_skeleton(probability: GeoRaster, *, tile_px: int, overlap_px: int, mask_options,
-                  progress: Progress):
+                  max_cut_m: float, progress: Progress):
     """Skeleton lines with widths of the whole raster, tile by tile, cores stitched."""
     pixel_m = probability.pixel_size
     transform = probability.transform
@@ -291,6 +296,8 @@ def _raw_skeleton(probability: GeoRaster, *, tile_px: int, overlap_px: int, mask
         mask = road_mask(probability.data[window], pixel_m, **mask_options)
         if not mask.any():
             continue
+        if max_cut_m > 0:
+            mask = bridge_cuts(mask, pixel_m, max_cut_m=max_cut_m)
         x0, y0 = _apply(transform, window[1].start, window[0].start)
         local = Affine(transform.a, transform.b, x0, transform.d, transform.e, y0)
         lines = skeleton_lines(mask, local, probability.crs)
@@ -369,6 +376,7 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
                    straighten: float = STRAIGHTEN, simplify_m: float = SIMPLIFY_M,
                    max_width_m: float = MAX_WIDTH_M, tile_px: int = TILE_PX,
                    overlap_px: int = OVERLAP_PX, low_threshold: float | None = None,
+                   max_cut_m: float = MAX_CUT_M,
                    progress: Progress = None) -> gpd.GeoDataFrame:
     """Road parts of a probability raster: clean centre lines split at junctions.
 
@@ -394,6 +402,9 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
         lawn or a square.
     tile_px, overlap_px : int
         Tile side and context on each side, pixels.
+    max_cut_m : float
+        Cuts across roads up to this long are closed in the mask before the skeleton
+        (:func:`gisroads.network.cuts.bridge_cuts`), metres; 0: none.
     progress : callable, optional
 
     Returns
@@ -407,7 +418,7 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
     mask_options = dict(threshold=threshold, smooth_m=smooth_m, max_hole_m2=max_hole_m2,
                         min_area_m2=min_area_m2, low_threshold=low_threshold)
     lines, width = _raw_skeleton(probability, tile_px=tile_px, overlap_px=overlap_px,
-                                 mask_options=mask_options,
+                                 mask_options=mask_options, max_cut_m=max_cut_m,
                                  progress=scaled(progress, 0.0, 0.8))
     report(progress, 0.8, "pruning spurs, contracting junctions")
     crs = probability.crs

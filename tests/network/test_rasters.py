@@ -68,7 +68,8 @@ def test_a_cut_road_is_bridged_and_parallel_roads_are_not_joined():
     mask[60:76, 280:296] = 0
     mask[220:236, :250] = 1             # another road, parallel, 80 m away, ends mid-raster
     raster = _raster(mask)
-    network = raster_to_network(raster)
+    # the gap edges' bridge: the raster repair of straight cuts (tested below) off
+    network = raster_to_network(raster, part_options={"max_cut_m": 0})
     gaps = network.qa["gap_edges"]
     assert gaps.selected.sum() == 1
     bridged = gaps[gaps.selected].geometry.iloc[0]
@@ -173,3 +174,83 @@ def test_hysteresis_keeps_a_road_whole_through_a_weak_stretch_and_weak_blobs_out
                                 part_options={"low_threshold": 0.6})
     assert len(network.centrelines) == 1
     assert network.centrelines.length_m.iloc[0] > 0.95 * 200
+
+
+def _cut_road(piece_m=12.0, cut_m=8.0):
+    """A road 15 m wide north-south, cut twice across: the piece between the cuts is
+    shorter than the road is wide."""
+    mask = np.zeros((400, 300), np.uint8)
+    mask[:, 120:150] = 1
+    cut, piece = int(cut_m / PIXEL_M), int(piece_m / PIXEL_M)
+    mask[150:150 + cut, :] = 0
+    mask[150 + cut + piece:150 + 2 * cut + piece, :] = 0
+    return mask
+
+
+def test_a_wide_road_cut_twice_is_one_straight_line_along_it():
+    raster = _raster(_cut_road())
+    network = raster_to_network(raster)
+    assert len(network.centrelines) == 1
+    line = network.centrelines.geometry.iloc[0]
+    x_axis = _xy(raster, 0, 135)[0]
+    np.testing.assert_allclose(shapely.get_coordinates(line)[:, 0], x_axis, atol=0.5)
+    assert line.length > 200 - 15.5          # the whole road, less half a width at each end
+    assert len(network.qa["gap_edges"]) == 0  # closed in the raster, before the skeleton
+    # the piece alone gives nothing the gap edges can link: two roads, the cut stays open
+    assert len(raster_to_network(raster, part_options={"max_cut_m": 0}).centrelines) == 2
+
+
+@pytest.mark.parametrize("smoothed", [False, True])
+@pytest.mark.parametrize("angle", range(0, 180, 15))
+def test_cuts_are_closed_whatever_the_road_direction(angle, smoothed):
+    from gisroads.network.cuts import bridge_cuts
+    from gisroads.network.rasters import road_mask
+
+    rows, cols = np.mgrid[:300, :300] - 150.0
+    t = np.radians(angle)
+    along = rows * np.cos(t) + cols * np.sin(t)
+    across = -rows * np.sin(t) + cols * np.cos(t)
+    road = np.abs(across) <= 10           # 10 m wide at 0.5 m pixels, stepped borders
+    mask = road & ~((np.abs(along) <= 12) | (np.abs(along - 40) <= 8))  # 12 m, 8 m cuts
+    if smoothed:                          # corners rounded as the network stage's mask
+        mask = road_mask(mask.astype(np.float32), PIXEL_M)
+    repaired = bridge_cuts(mask, PIXEL_M)
+    # filled across the road but for the pixels of its stepped borders, and not beyond
+    assert repaired[(np.abs(across) <= 8) & (np.abs(along) < 120)].all()
+    assert not (repaired & (np.abs(across) > 11)).any()
+
+
+def _not_cuts(which):
+    rows, cols = np.mgrid[:400, :400]
+    mask = np.zeros((400, 400), bool)
+    if which == "block":            # two parallel roads 7 m apart, cross streets 30 m apart
+        mask[20:36, 40:130] = mask[50:66, 40:130] = True
+        mask[0:100, 40:56] = mask[0:100, 114:130] = True
+    elif which == "long block":     # the same, 150 m long
+        mask[20:36, 40:360] = mask[50:66, 40:360] = True
+        mask[0:100, 40:56] = mask[0:100, 344:360] = True
+    elif which == "dead end":       # a road ending 7 m short of another road's side
+        mask[50:66, :] = mask[80:400, 120:136] = True
+    elif which == "blob ahead":     # a false ellipse 3 m from a road's end, as wide
+        mask[(((rows - 200) / 8.0) ** 2 + ((cols - 200) / 10.0) ** 2) <= 1] = True
+        mask[192:208, 216:400] = True
+    elif which == "round blob ahead":   # a round one, 10 m across
+        mask[np.hypot(rows - 200, cols - 200) <= 20] = True
+        mask[192:208, 226:400] = True
+    elif which == "blob beside":    # an ellipse 2 m off a road's side
+        mask[(((rows - 180) / 4.0) ** 2 + ((cols - 200) / 12.0) ** 2) <= 1] = True
+        mask[192:208, :] = True
+    elif which == "curved median":  # a dual carriageway round a bend, 6 m median
+        radius = np.hypot(rows - 400, cols - 200)
+        mask = (((radius > 200) & (radius < 216)) | ((radius > 228) & (radius < 244))) & (
+            rows < 390)
+    return mask
+
+
+@pytest.mark.parametrize("which", ["block", "long block", "dead end", "blob ahead",
+                                   "round blob ahead", "blob beside", "curved median"])
+def test_cut_repair_leaves_blocks_dead_ends_blobs_and_medians(which):
+    from gisroads.network.cuts import bridge_cuts
+
+    mask = _not_cuts(which)
+    assert (bridge_cuts(mask, PIXEL_M) == mask).all()
