@@ -3,14 +3,16 @@
 A synthetic city of ``side_km`` x ``side_km`` (the project's generator: :func:`make_scene`
 lays the street grid out over any extent and :func:`write_cloud` renders and streams the
 cloud tile by tile, so the cloud is never in memory) goes through the whole LiDAR pipeline
-(``extract_roads``, the paper's intensity cue) with 1 and 2 workers, each run in a fresh
-interpreter and a fresh work folder: the one streaming pass that buckets the points into
-the tile grid, then the tiles, then stitching and the network. Reported per size and number
+(``gisroads lidar``'s job, the paper's intensity cue) with 1 and 2 workers, each run in a
+fresh interpreter and a fresh work folder: the one streaming pass that buckets the points
+into the tile grid, then the tiles, stitching and the network, and the GeoPackage with the
+tiles' QA layers written one tile at a time. Reported per size and number
 of workers: wall time and its split (reading pass, tiles and network), seconds per km², the
 peak resident memory of the driving process and of the largest worker process, tiles, and
 the quality against the synthetic truth (buffer 3 m); then the ratios the issue asks for:
 time per km² at the largest size over that at the smallest (linear cost: about 1), and the
-speed-up of 2 workers over 1 on the same job, with whether both wrote the same geometries.
+speed-up of 2 workers over 1 on the same job, with whether both wrote the same geometries
+(every layer, in the same order).
 
     python bench/city.py --sides 1,2 --density 10 --workers 1,2 --out out/bench-city
 """
@@ -30,20 +32,18 @@ from pathlib import Path
 
 def _run(cloud: str, work: str, out: str, workers: int) -> dict:
     """One end-to-end run in this interpreter (called in a subprocess by :func:`measure`)."""
-    from gisroads.io.vector import write_geopackage
-    from gisroads.lidar.pipeline import extract_roads
+    from gisroads.jobs.lidar import lidar_job
     from gisroads.lidar.tilestore import open_store
 
     start = time.perf_counter()
     store = open_store(cloud, work)
     read_s = time.perf_counter() - start
-    roads = extract_roads(cloud, work_dir=work, workers=workers, tile_maps=False)
+    result = lidar_job(cloud, out, work_dir=work, workers=workers)
     total_s = time.perf_counter() - start
-    write_geopackage(out, roads.network.layers())
     me = resource.getrusage(resource.RUSAGE_SELF)
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     own, children = me.ru_maxrss / 1024, kids.ru_maxrss / 1024
-    return {"workers": workers, "points": store.point_count, "tiles": roads.run["tiles"],
+    return {"workers": workers, "points": store.point_count, "tiles": result["tiles_run"],
             "read_s": read_s, "tiles_and_network_s": total_s - read_s, "total_s": total_s,
             # CPU seconds of this process and its worker processes: the work done, which
             # other jobs on a shared machine do not change (wall time they do)
@@ -61,6 +61,7 @@ def measure(out: Path, *, sides_km=(1.0, 2.0), density: float = 10.0, workers=(1
     import shapely
 
     from gisroads.evaluate import buffer_metrics
+    from gisroads.io.vector import list_layers
     from gisroads.synthetic import make_scene, write_cloud
 
     out.mkdir(parents=True, exist_ok=True)
@@ -95,14 +96,17 @@ def measure(out: Path, *, sides_km=(1.0, 2.0), density: float = 10.0, workers=(1
                 run.update(km2=side * side, s_per_km2=run["total_s"] / (side * side),
                            completeness=scores.completeness, correctness=scores.correctness,
                            quality=scores.quality, road_km=float(lines.length.sum()) / 1000)
-                run["_wkb"] = shapely.to_wkb(lines.geometry.values)
+                run["_wkb"] = {name: shapely.to_wkb(gpd.read_file(gpkg, layer=name)
+                                                    .geometry.values)
+                               for name in list_layers(gpkg)}
                 runs[w] = run
                 shutil.rmtree(work, ignore_errors=True)
             first = runs[workers[0]]
             for w, run in runs.items():
                 run["same_output_as_1_worker"] = bool(
-                    len(run["_wkb"]) == len(first["_wkb"])
-                    and np.array_equal(run["_wkb"], first["_wkb"]))
+                    list(run["_wkb"]) == list(first["_wkb"])
+                    and all(np.array_equal(run["_wkb"][name], first["_wkb"][name])
+                            for name in run["_wkb"]))
             for run in runs.values():
                 del run["_wkb"]
             tiles = runs[workers[0]]["tiles"]

@@ -4,6 +4,7 @@ a network), the evidence raster, tagging the road points, and the city blocks of
 from __future__ import annotations
 
 import warnings
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,7 @@ from ..geo import POLYGONS, GeoRaster
 from ..io.las import cloud_crs, iter_las_chunks, read_las
 from ..io.quicklook import write_quicklook
 from ..io.raster import read_raster, write_geotiff
-from ..io.vector import list_layers, read_layer, write_geopackage
+from ..io.vector import GeoPackageWriter, list_layers, read_layer, write_geopackage
 from ..lidar.blocks import (MAX_EDGE_M, MIN_BLOCK_AREA_M2, ROAD_FRACTION, SAMPLE_SPACING_M,
                             city_blocks, road_likelihood, thin_points)
 from ..lidar.ground import ground_planes
@@ -23,9 +24,9 @@ from ..lidar.hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, T_BD
                                 likelihood_maps, road_hypotheses)
 from ..lidar.intensity import write_intensity_images
 from ..lidar.mincover import A, D_MAX, SEED_STEP_M, exact_min_cover, greedy_min_cover
-from ..lidar.pipeline import (EVIDENCE_THRESHOLD, auto_cell_m, edges_and_segments,
-                              evidence_raster, extract_roads, ground_and_intensity,
-                              mosaic_cores)
+from ..lidar.pipeline import (EVIDENCE_THRESHOLD, TiledRoads, auto_cell_m,
+                              edges_and_segments, evidence_raster, extract_roads,
+                              ground_and_intensity)
 from ..lidar.tagging import ground_level_heights, tag_road_points
 from ..lidar.tilestore import inputs_crs, las_inputs
 from ..progress import Progress, report, scaled
@@ -70,78 +71,105 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
         raise GisroadsError(f"a tagged LAS/LAZ copy is made of one input file, not of "
                          f"{len(inputs)}: tag each file on its own")
     cloud_path = inputs[0] if len(inputs) == 1 else cloud_path
-    roads = extract_roads(
-        cloud_path, cue=cue, tile_m=tile_m, overlap_m=overlap_m, cell_m=cell_m,
-        widths_m=widths_m, lengths_m=lengths_m, n_segments=n_segments, t_planar=t_planar,
-        t_vert=t_vert, threshold=threshold, network_options=network_options,
-        min_points=min_points, workers=workers, scheduler=scheduler, work_dir=work_dir,
-        # the per-width likelihood maps of every tile are kept only to be written
-        tile_maps=rasters_dir is not None if tile_maps is None else tile_maps,
-        progress=scaled(progress, 0.0, 0.85))
-    network = roads.network
-    write_geopackage(out_path, network.layers())
-    _warn_if_no_road(network, cloud_path)
-    working, _ = inputs_crs(inputs)
-    result = {**network_summary(out_path, network), "tiles": len(roads.tiles),
-              "cue": cue, "input_files": len(inputs),
-              "tiles_run": roads.run.get("tiles", 0),
-              "tiles_reused": roads.run.get("reused", 0)}
-    if roads.cues:
-        result["cues"] = ",".join(roads.cues)
-    # tiles with a ground level to image (a tile of a few metres may have none)
-    imaged = [t for t in roads.tiles if len(t.intensity.data)]
-    if rasters_dir is not None:
-        report(progress, 0.86, "writing rasters")
-        rasters = Path(rasters_dir)
-        rasters.mkdir(parents=True, exist_ok=True)
-        for tile in imaged:
-            name = f"tile_r{tile.tile.row}_c{tile.tile.col}"
-            levels = [f"level_{k}" for k in range(tile.intensity.data.shape[0])]
-            write_geotiff(rasters / f"{name}_intensity.tif", tile.intensity, band_names=levels)
-            for k, maps in enumerate(tile.likelihood):
-                write_geotiff(rasters / f"{name}_likelihood_level_{k}.tif", maps,
-                              band_names=[f"width_{w:g}_m" for w in widths_m])
-        if imaged:
-            write_geotiff(rasters / "ground_heights.tif", roads.heights, band_names=[
-                f"level_{k}" for k in range(roads.heights.data.shape[0])])
-        if roads.evidence is not None:
-            write_geotiff(rasters / "road_evidence.tif", roads.evidence,
-                          band_names=["road_likelihood"])
-        result["rasters"] = rasters
-    if tagged_las is not None:
-        report(progress, 0.9, "tagging road points")
-        # the evidence cue images one surface: its heights come from the cloud's planes
-        heights = (roads.heights if roads.heights is not None
-                   else ground_level_heights(read_las(cloud_path)))
-        result["tagged_points"] = tag_road_points(cloud_path, tagged_las,
-                                                  network.polygons.to_crs(working), heights)
-        result["tagged_las"] = Path(tagged_las)
-    if quicklook is not None:
-        report(progress, 0.97, "drawing the quick-look")
-        background = None
-        if imaged:
-            intensity = mosaic_cores([(t.tile, t.intensity) for t in imaged],
-                                     imaged[0].intensity.pixel_size)
-            background = GeoRaster(intensity.data[0], intensity.transform, working)
-        elif roads.evidence is not None:
-            background = roads.evidence
-        # the QA layer of the cue: the selected rectangles, or the bridged gaps
-        qa = (network.qa["rectangles"] if "rectangles" in network.qa
-              else network.qa["gap_edges"].query("selected"))
-        write_quicklook(quicklook, [
-            (qa.to_crs(working), dict(facecolor="none", edgecolor="cyan", linewidth=0.6)
-             if "rectangles" in network.qa else dict(color="cyan", linewidth=2)),
-            (network.centrelines.to_crs(working),
-             dict(color="red", linewidth=1.5, label="road centre lines")),
-            (network.junctions.to_crs(working),
-             dict(color="yellow", markersize=20, label="junctions")),
-        ], background=background,
-            title=f"{Path(str(cloud_path)).name}: roads over the "
-                  + ("road evidence" if roads.evidence is not None
-                     else "ground intensity (level 0)"))
-        result["quicklook"] = Path(quicklook)
+    # the network only: the tiles' QA layers and rasters are written one tile at a time
+    # from the files the tiles wrote, so that a city's driver holds one tile of them
+    with extract_roads(
+            cloud_path, cue=cue, tile_m=tile_m, overlap_m=overlap_m, cell_m=cell_m,
+            widths_m=widths_m, lengths_m=lengths_m, n_segments=n_segments, t_planar=t_planar,
+            t_vert=t_vert, threshold=threshold, network_options=network_options,
+            min_points=min_points, workers=workers, scheduler=scheduler, work_dir=work_dir,
+            lazy=True, progress=scaled(progress, 0.0, 0.8)) as roads:
+        network = roads.network
+        rasters = None if rasters_dir is None else Path(rasters_dir)
+        # the tiles' per-width likelihood maps are read only to be written
+        tile_maps = rasters is not None if tile_maps is None else tile_maps
+        _write_tiles(roads, out_path, rasters, tile_maps=tile_maps, widths_m=widths_m,
+                     progress=scaled(progress, 0.8, 0.9))
+        _warn_if_no_road(network, cloud_path)
+        working, _ = inputs_crs(inputs)
+        result = {**network_summary(out_path, network), "tiles": len(roads.tiles),
+                  "cue": cue, "input_files": len(inputs),
+                  "tiles_run": roads.run.get("tiles", 0),
+                  "tiles_reused": roads.run.get("reused", 0)}
+        if roads.cues:
+            result["cues"] = ",".join(roads.cues)
+        if rasters is not None:
+            if roads.evidence is not None:
+                write_geotiff(rasters / "road_evidence.tif", roads.evidence,
+                              band_names=["road_likelihood"])
+            result["rasters"] = rasters
+        if tagged_las is not None:
+            report(progress, 0.9, "tagging road points")
+            # the evidence cue images one surface: its heights come from the cloud's planes
+            # (both whole in memory, as the copy of one file)
+            heights = (roads.mosaic("heights") if roads.tiles
+                       else ground_level_heights(read_las(cloud_path)))
+            result["tagged_points"] = tag_road_points(cloud_path, tagged_las,
+                                                      network.polygons.to_crs(working),
+                                                      heights)
+            result["tagged_las"] = Path(tagged_las)
+        if quicklook is not None:
+            report(progress, 0.97, "drawing the quick-look")
+            background = None
+            if roads.imaged:
+                intensity = roads.mosaic("intensity", bands=1)
+                background = GeoRaster(intensity.data[0], intensity.transform, working)
+            elif roads.evidence is not None:
+                background = roads.evidence
+            # the QA layer of the cue: the selected rectangles, or the bridged gaps
+            qa = (read_layer(out_path, "rectangles") if roads.cue == "intensity"
+                  else network.qa["gap_edges"].query("selected"))
+            write_quicklook(quicklook, [
+                (qa.to_crs(working), dict(facecolor="none", edgecolor="cyan", linewidth=0.6)
+                 if roads.cue == "intensity" else dict(color="cyan", linewidth=2)),
+                (network.centrelines.to_crs(working),
+                 dict(color="red", linewidth=1.5, label="road centre lines")),
+                (network.junctions.to_crs(working),
+                 dict(color="yellow", markersize=20, label="junctions")),
+            ], background=background,
+                title=f"{Path(str(cloud_path)).name}: roads over the "
+                      + ("road evidence" if roads.evidence is not None
+                         else "ground intensity (level 0)"))
+            result["quicklook"] = Path(quicklook)
     report(progress, 1.0, "done")
     return result
+
+
+def _write_tiles(roads: TiledRoads, out_path, rasters: Path | None, *, tile_maps: bool,
+                 widths_m, progress: Progress) -> None:
+    """The network's layers and the tiles' QA layers into the GeoPackage ``out_path`` and,
+    into the folder ``rasters``, each tile's intensity images (whole with its per-width
+    likelihood maps when ``tile_maps``, else its core) and the mosaic of the ground
+    heights: one tile read at a time, in grid order."""
+    with ExitStack() as outputs:
+        gpkg = outputs.enter_context(GeoPackageWriter(out_path))
+        for name, frame in roads.network.layers().items():
+            gpkg.write(name, frame)
+        for name, frame in roads.qa().items():  # their schema when no tile has a feature
+            gpkg.append(name, frame)
+        heights = None
+        if rasters is not None:
+            rasters.mkdir(parents=True, exist_ok=True)
+            if roads.imaged:
+                heights = outputs.enter_context(roads.mosaic_file(
+                    rasters / "ground_heights.tif", "heights",
+                    band_names=[f"level_{k}" for k in range(roads.levels)]))
+        for i, tile in enumerate(roads.results(maps=tile_maps)):
+            report(progress, i / len(roads.tiles), f"writing tile {i + 1} of "
+                                                   f"{len(roads.tiles)}")
+            for name, frame in roads.qa(tile).items():
+                gpkg.append(name, frame)
+            if heights is not None:
+                heights(tile)
+            if rasters is not None and len(tile.intensity.data):
+                name = f"tile_r{tile.tile.row}_c{tile.tile.col}"
+                levels = [f"level_{k}" for k in range(tile.intensity.data.shape[0])]
+                write_geotiff(rasters / f"{name}_intensity.tif", tile.intensity,
+                              band_names=levels)
+                for k, maps in enumerate(tile.likelihood):
+                    write_geotiff(rasters / f"{name}_likelihood_level_{k}.tif", maps,
+                                  band_names=[f"width_{w:g}_m" for w in widths_m])
+        report(progress, 1.0, "writing the layers")
 
 
 def _level_image(intensity_path, level: int) -> GeoRaster:

@@ -19,20 +19,23 @@ them) out, and the network stage again.
 from __future__ import annotations
 
 import hashlib
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from functools import lru_cache, partial
 from pathlib import Path
-from typing import NamedTuple
+from typing import Iterator, NamedTuple
 
 from affine import Affine
 import geopandas as gpd
 import numpy as np
 import pandas as pd
+from rasterio.windows import Window
 import shapely
 
 from ..features.edges import local_energy
 from ..geo import GeoRaster, RoadNetwork
 from ..io.las import PointCloud
+from ..io.raster import geotiff_writer
 from ..parallel import NOT_KEPT, for_each_result, keep_result, kept_result
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
@@ -228,26 +231,37 @@ class _TileJob:
     cue: str
     min_points: int
     options: dict
-    results: Path | None
-    """Folder of finished tiles (None: nothing kept)."""
+    results: Path
+    """Folder of finished tiles."""
     references: object = None
-    tile_maps: bool = True
-    """Return the intensity cue's per-width likelihood maps (kept on disk either way)."""
 
 
-def _tile_result_path(job: _TileJob, tile: Tile) -> Path | None:
-    return None if job.results is None else job.results / f"tile_{tile.row}_{tile.col}.pkl"
+class _Finished(NamedTuple):
+    """What the driver holds of a finished tile of the intensity cue: the rest of its
+    result (QA layers, rasters) stays in its file until the outputs are written, one tile
+    at a time (:class:`TiledRoads`)."""
+
+    centrelines: gpd.GeoDataFrame
+    levels: int
+    """Bands of its ground heights."""
+    imaged: bool
+    """It has an intensity image (a ground level)."""
+
+
+def _tile_result_path(job: _TileJob, tile: Tile) -> Path:
+    return job.results / f"tile_{tile.row}_{tile.col}.pkl"
 
 
 def _run_tile(job: _TileJob, tile: Tile):
-    """``(reused, result)`` of one tile: its :class:`TileRoads` (intensity cue) or
-    ``(likelihood, vehicle and dropout cells, references, used, missing)`` (evidence cue),
-    None for a tile with fewer than ``min_points`` points. A finished tile is written to
-    ``job.results`` (atomically) and taken from there when it is already there."""
+    """``(reused, result)`` of one tile: :class:`_Finished` of its :class:`TileRoads`
+    (intensity cue) or ``(likelihood, vehicle and dropout cells, references, used,
+    missing)`` (evidence cue), None for a tile with fewer than ``min_points`` points. A
+    finished tile is written whole to ``job.results`` (atomically) and taken from there when
+    it is already there."""
     path = _tile_result_path(job, tile)
     kept = kept_result(path)
     if kept is not NOT_KEPT:
-        return True, _trimmed(job, kept)
+        return True, _for_driver(kept)
     cloud = job.store.read(tile)
     result = None
     if cloud is not None and len(cloud) >= job.min_points:
@@ -263,13 +277,16 @@ def _run_tile(job: _TileJob, tile: Tile):
                       evidence.references, evidence.used, evidence.missing)
     del cloud
     keep_result(path, result)
-    return False, _trimmed(job, result)
+    return False, _for_driver(result)
 
 
-def _trimmed(job: _TileJob, result):
-    """The result without the per-width likelihood maps unless ``job.tile_maps``."""
-    if isinstance(result, TileRoads) and not job.tile_maps:
-        result = replace(result, likelihood=[])
+def _for_driver(result):
+    """What a task sends the driver: the evidence cue's whole result (mosaicked in
+    memory), the intensity cue's :class:`_Finished` (a city's QA layers and rasters are
+    read back from the tiles' files one at a time)."""
+    if isinstance(result, TileRoads):
+        return _Finished(result.centrelines, result.heights.data.shape[0],
+                         len(result.intensity.data) > 0)
     return result
 
 
@@ -296,30 +313,27 @@ def _code_fingerprint() -> str:
     return sha.hexdigest()[:16]
 
 
-def _results_folder(store: TileStore, work_dir, cue: str, options: dict) -> Path | None:
-    """Where the finished tiles of this input, grid, cue and parameters are kept."""
-    if work_dir is None:
-        return None
+def _results_folder(store: TileStore, work_dir, cue: str, options: dict) -> Path:
+    """Where the finished tiles of this input, grid, cue and parameters are kept: in the
+    work folder, or without one beside the temporary tile store (removed with it)."""
     key = digest({"store": store.key, "cue": cue, "options": options,
                   "code": _code_fingerprint()})
-    folder = Path(work_dir) / f"tiles-{cue}-{key}"
+    folder = Path(store.temporary if work_dir is None else work_dir) / f"tiles-{cue}-{key}"
     folder.mkdir(parents=True, exist_ok=True)
     return folder
 
 
 def _run_tiles(job: _TileJob, tiles: list[Tile], *, workers: int, scheduler, progress,
-               run: dict, keep=None) -> list:
-    """Results of ``tiles`` in their order (:func:`gisroads.parallel.for_each_result`),
-    each passed through ``keep(tile, result)`` as it arrives when given: what the driver
-    holds of a tile is then only what ``keep`` returns."""
+               run: dict) -> list:
+    """What the driver gets of ``tiles`` (:func:`_for_driver`), in their order
+    (:func:`gisroads.parallel.for_each_result`)."""
     results = [None] * len(tiles)
     reused = 0
 
     def arrived(i, outcome):
         nonlocal reused
         reused += outcome[0]
-        result = outcome[1]
-        results[i] = result if keep is None or result is None else keep(tiles[i], result)
+        results[i] = outcome[1]
     for_each_result(partial(_run_tile, job), tiles, arrived, workers=workers,
                     scheduler=scheduler, progress=progress)
     run["tiles"] = run.get("tiles", 0) + len(tiles)
@@ -341,10 +355,9 @@ def _core_raster(raster: GeoRaster, tile: Tile) -> GeoRaster:
 
 
 def _core_only(tile: Tile, result: TileRoads) -> TileRoads:
-    """What the network, its QA layers and the mosaics need of a finished tile: its QA
-    rectangles and hypotheses in its core, its intensity and heights cut to its core, no
-    per-width maps (what :func:`assemble` would keep of it anyway). A city's driver then
-    holds no overlap: 0.44 of each 300 m tile with the default 100 m overlap."""
+    """What the QA layers and the mosaics need of a finished tile: its QA rectangles and
+    hypotheses in its core, its intensity and heights cut to its core, no per-width maps:
+    0.44 of a 300 m tile with the default 100 m overlap."""
     return replace(result, rectangles=_in_core(result.rectangles, tile),
                    hypotheses=_in_core(result.hypotheses, tile), likelihood=[],
                    intensity=_core_raster(result.intensity, tile),
@@ -453,8 +466,8 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
                   n_segments: int = 150, t_planar: float = 0.01, t_vert: float = 0.98,
                   threshold: float = EVIDENCE_THRESHOLD, network_options: dict | None = None,
                   min_points: int = 1000, workers: int = 1, scheduler: str | None = None,
-                  work_dir=None, tile_maps: bool = True,
-                  progress: Progress = None) -> LidarRoads:
+                  work_dir=None, tile_maps: bool = True, lazy: bool = False,
+                  progress: Progress = None) -> LidarRoads | TiledRoads:
     """The road network of a point cloud, tile by tile.
 
     The input is read once: its points are bucketed into the tile grid on disk
@@ -491,11 +504,14 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
         and started again reuses what was finished. By default a temporary folder,
         removed at the end.
     tile_maps : bool
-        Keep every tile's per-width likelihood maps in ``LidarRoads.tiles`` (written by
-        ``gisroads lidar --rasters``); False drops them as tiles finish and keeps of each
-        tile only its core (its QA layers, intensity and heights; :func:`_core_only`),
-        which bounds the memory of a city (about 9 MB per tile and ground level for the
-        maps, and 0.44 of the rest).
+        Keep every tile whole with its per-width likelihood maps in ``LidarRoads.tiles``;
+        False keeps of each tile only its core (its QA layers, intensity and heights;
+        :func:`_core_only`). With ``lazy``, :meth:`TiledRoads.results` chooses.
+    lazy : bool
+        Return a :class:`TiledRoads`: the network, with the tiles' QA layers and rasters
+        left in the files the tiles wrote, to be read one tile at a time (a city's outputs
+        written in the memory of one tile: :func:`gisroads.jobs.lidar.lidar_job`). Use it
+        as a context manager: its end removes the temporary tile store.
     Other parameters (``cue="intensity"``): see :func:`extract_tile`.
 
     Returns
@@ -503,7 +519,8 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
     LidarRoads
         The network in the cloud's CRS; QA layers ``rectangles`` and ``hypotheses``
         (intensity), ``gap_edges``, ``junction_connections`` and ``rejected`` (evidence).
-        ``run`` counts the tiles and those taken from ``work_dir``.
+        ``run`` counts the tiles and those taken from ``work_dir``. A :class:`TiledRoads`
+        when ``lazy``.
 
     Raises
     ------
@@ -515,30 +532,48 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
         raise ValueError(f"cue must be one of {CUES}, not {cue!r}")
     parallel = dict(workers=workers, scheduler=scheduler, work_dir=work_dir)
     if cue == "evidence":
-        return _evidence_roads(path, threshold=threshold, network_options=network_options,
-                               progress=progress, tile_m=tile_m, overlap_m=overlap_m,
-                               cell_m=cell_m, min_points=min_points, **parallel)
-    store = open_store(path, work_dir, tile_m=tile_m, overlap_m=overlap_m,
-                       progress=scaled(progress, 0.0, 0.1))
-    try:
-        tiles = store.tiles
-        if cell_m is None:
-            cell_m = auto_cell_m(store.point_count, _covered_m2(tiles))
-        options = dict(cell_m=cell_m, widths_m=tuple(widths_m), lengths_m=tuple(lengths_m),
-                       n_segments=n_segments, t_planar=t_planar, t_vert=t_vert)
-        job = _TileJob(store, "intensity", min_points, options, _results_folder(
-            store, work_dir, "intensity", {**options, "min_points": min_points}),
-            tile_maps=tile_maps)
-        run: dict = {}
-        results = _run_tiles(job, tiles, workers=workers, scheduler=scheduler,
-                             progress=scaled(progress, 0.1, 0.95), run=run,
-                             keep=None if tile_maps else _core_only)
-        roads = assemble([r for r in results if r is not None], crs=store.crs, cell_m=cell_m)
-        roads.run = run
-        return roads
-    finally:
-        if work_dir is None:
-            store.remove()
+        roads = _evidence_roads(path, threshold=threshold, network_options=network_options,
+                                progress=progress, tile_m=tile_m, overlap_m=overlap_m,
+                                cell_m=cell_m, min_points=min_points, **parallel)
+        tiled = TiledRoads(roads.network, cue, tiles=[], files=[], levels=0, imaged=False,
+                           evidence=roads.evidence, cues=roads.cues, run=roads.run)
+    else:
+        store = open_store(path, work_dir, tile_m=tile_m, overlap_m=overlap_m,
+                           progress=scaled(progress, 0.0, 0.1))
+        try:
+            tiled = _intensity_roads(store, cell_m=cell_m, min_points=min_points, options=dict(
+                widths_m=tuple(widths_m), lengths_m=tuple(lengths_m), n_segments=n_segments,
+                t_planar=t_planar, t_vert=t_vert), progress=scaled(progress, 0.1, 0.95),
+                **parallel)
+        except BaseException:
+            if work_dir is None:
+                store.remove()
+            raise
+    if lazy:
+        return tiled
+    with tiled:
+        return tiled.in_memory(maps=tile_maps)
+
+
+def _intensity_roads(store: TileStore, *, cell_m, min_points: int, options: dict, workers,
+                     scheduler, work_dir, progress) -> TiledRoads:
+    """The intensity cue's tiles run and their centre lines stitched into the network."""
+    tiles = store.tiles
+    if cell_m is None:
+        cell_m = auto_cell_m(store.point_count, _covered_m2(tiles))
+    options = {"cell_m": cell_m, **options}
+    job = _TileJob(store, "intensity", min_points, options, _results_folder(
+        store, work_dir, "intensity", {**options, "min_points": min_points}))
+    run: dict = {}
+    finished = _run_tiles(job, tiles, workers=workers, scheduler=scheduler,
+                          progress=progress, run=run)
+    done = [(tile, f) for tile, f in zip(tiles, finished) if f is not None]
+    network = _stitched_network([(tile, f.centrelines) for tile, f in done], store.crs)
+    return TiledRoads(network, "intensity", [tile for tile, _ in done],
+                      [_tile_result_path(job, tile) for tile, _ in done],
+                      max((f.levels for _, f in done), default=0),
+                      any(f.imaged for _, f in done), run=run, crs=store.crs, cell_m=cell_m,
+                      store=store if work_dir is None else None)
 
 
 def _in_core(frame: gpd.GeoDataFrame, tile: Tile) -> gpd.GeoDataFrame:
@@ -550,58 +585,198 @@ def _in_core(frame: gpd.GeoDataFrame, tile: Tile) -> gpd.GeoDataFrame:
     return frame[(x >= core[0]) & (x < core[2]) & (y >= core[1]) & (y < core[3])]
 
 
-def assemble(results: list[TileRoads], *, crs, cell_m: float = 0.5) -> LidarRoads:
-    """Stitch tiles into one network in the file's own CRS (see :func:`extract_roads`).
+#: The QA layers of the intensity cue's tiles.
+TILE_QA = ("rectangles", "hypotheses")
 
-    ``crs`` is ``(working metre CRS, file CRS)`` as :func:`gisroads.io.las.cloud_crs` gives.
-    """
-    working, source = crs
-    pieces = [(r.tile, r.centrelines) for r in results]
+
+def _stitched_network(pieces: list[tuple[Tile, gpd.GeoDataFrame]], crs) -> RoadNetwork:
+    """The tiles' centre lines stitched into one network (no QA layer) in the file's own
+    CRS; ``crs`` is ``(working metre CRS, file CRS)`` as
+    :func:`gisroads.io.las.cloud_crs` gives."""
+    working, _ = crs
     lines = stitch_tiles(pieces) if pieces else _no_lines(working).assign(level=0)
     network = ribbons_to_network(lines, method=METHOD)
     network.polygons = _with_level(network.polygons,
                                    shapely.point_on_surface(network.polygons.geometry.values),
                                    lines)
-    network.qa = {"rectangles": _concat([_in_core(r.rectangles, r.tile) for r in results],
-                                        working),
-                  "hypotheses": _concat([_in_core(r.hypotheses, r.tile) for r in results],
-                                        working)}
-    heights = mosaic_cores([(r.tile, r.heights) for r in results], cell_m) if results else None
-    if source is not None and working is not None and source != working:
-        network = RoadNetwork(network.centrelines.to_crs(source),
-                              network.polygons.to_crs(source),
-                              network.junctions.to_crs(source),
-                              {name: frame.to_crs(source) for name, frame in network.qa.items()})
-    return LidarRoads(network, heights, results)
+    return RoadNetwork(*(_to_output(frame, crs) for frame in (
+        network.centrelines, network.polygons, network.junctions)))
 
 
-def mosaic_cores(rasters: list[tuple[Tile, GeoRaster]], cell_m: float) -> GeoRaster:
-    """One raster over all tiles (per-tile rasters such as ground heights or intensity
-    images, bands padded with NaN to the most levels), each cell taken from the tile whose
-    core holds it. Tile
-    grids are aligned to multiples of ``cell_m`` (see :func:`ground_and_intensity`)."""
-    xmin = min(t.core[0] for t, _ in rasters)
-    ymin = min(t.core[1] for t, _ in rasters)
-    xmax = max(t.core[2] for t, _ in rasters)
-    ymax = max(t.core[3] for t, _ in rasters)
+def _output_crs(crs):
+    """The CRS the outputs are written in, of ``crs`` ``(working metre CRS, file CRS)``:
+    the file's own when it has one, else the working CRS."""
+    working, source = crs
+    return source if source is not None and working is not None else working
+
+
+def _to_output(frame: gpd.GeoDataFrame, crs) -> gpd.GeoDataFrame:
+    """``frame`` (in the working CRS) in the output CRS (:func:`_output_crs`)."""
+    out = _output_crs(crs)
+    return frame if out == crs[0] else frame.to_crs(out)
+
+
+@dataclass
+class TiledRoads:
+    """The road network of a point cloud, with the outputs of its tiles (QA layers,
+    intensity images, ground heights, per-width likelihood maps) left in the files the
+    tiles wrote and read one tile at a time (:meth:`results`): the driver of a city holds
+    the centre lines and one tile. ``extract_roads(..., lazy=True)`` gives it; use it as a
+    context manager, whose end removes the temporary tile store (there is none with a
+    ``work_dir``)."""
+
+    network: RoadNetwork
+    """In the cloud's CRS; the QA layers of the evidence cue (those of the intensity cue's
+    tiles: :meth:`qa`)."""
+    cue: str
+    tiles: list[Tile]
+    """The tiles with a result, in grid order (row by row)."""
+    files: list[Path]
+    """Each tile's result (:class:`TileRoads`)."""
+    levels: int
+    """The most ground levels of a tile: bands of the heights mosaic."""
+    imaged: bool
+    """Some tile has an intensity image."""
+    evidence: GeoRaster | None = None
+    cues: dict = field(default_factory=dict)
+    run: dict = field(default_factory=dict)
+    crs: tuple | None = None
+    """``(working metre CRS, file CRS)``."""
+    cell_m: float | None = None
+    """Image cell, metres."""
+    store: TileStore | None = None
+    """The temporary tile store, removed at the end."""
+
+    def __enter__(self) -> TiledRoads:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.store is not None:
+            self.store.remove()
+            self.store = None
+
+    def results(self, *, maps: bool = False) -> Iterator[TileRoads]:
+        """Each tile's result, in grid order, read from its file when asked for: whole
+        with its per-width likelihood maps (``maps``), or its core (:func:`_core_only`)."""
+        for tile, path in zip(self.tiles, self.files):
+            result = kept_result(path)
+            yield result if maps else _core_only(tile, result)
+
+    def qa(self, result: TileRoads | None = None) -> dict[str, gpd.GeoDataFrame]:
+        """A tile's share of the QA layers (its rectangles and hypotheses whose centre is
+        in its core) in the output CRS; without a result, the layers empty (their schema
+        when no tile has a feature)."""
+        if self.cue != "intensity":
+            return {}
+        if result is None:
+            return {name: _concat([], _output_crs(self.crs)) for name in TILE_QA}
+        return {name: _to_output(_in_core(getattr(result, name), result.tile), self.crs)
+                for name in TILE_QA}
+
+    def mosaic(self, name: str, bands: int | None = None) -> GeoRaster | None:
+        """The tiles' rasters ``name`` (``"heights"``, ``"intensity"``) mosaicked from
+        their cores in memory (:func:`mosaic_cores`), their first ``bands`` (all by
+        default); None without a tile."""
+        if not self.tiles:
+            return None
+        rasters = ((r.tile, getattr(r, name)) for r in self.results())
+        return mosaic_cores([(tile, GeoRaster(raster.data[:bands], raster.transform,
+                                              raster.crs)) for tile, raster in rasters],
+                            self.cell_m)
+
+    @contextmanager
+    def mosaic_file(self, path, name: str, *, band_names: list[str] | None = None):
+        """A GeoTIFF of the tiles' rasters ``name`` mosaicked from their cores, as
+        :meth:`mosaic`, written one tile at a time: yields ``write(result)``, to be called
+        with each of :meth:`results`; the file is there when the block ends."""
+        transform, (rows, cols) = _mosaic_grid(self.tiles, self.cell_m, self.levels)
+        with geotiff_writer(path, shape=(self.levels, rows, cols), dtype=np.float32,
+                            transform=transform, crs=self.crs[0],
+                            band_names=band_names) as dst:
+            # NaN where no core is: GDAL gives 0 to the unwritten cells of a block written
+            # in part (one strip of blocks at a time, as GDAL stores them)
+            for r in range(0, rows, 256):
+                strip = min(256, rows - r)
+                dst.write(np.full((self.levels, strip, cols), np.nan, np.float32),
+                          window=Window(0, r, cols, strip))
+
+            def write(result: TileRoads) -> None:
+                raster = getattr(result, name)
+                (r0, r1, c0, c1), (sr, sc) = _core_window(result.tile, raster, transform,
+                                                          (rows, cols), self.cell_m)
+                if r1 <= r0 or c1 <= c0:
+                    return
+                # every band: GDAL fills the bands of a block never written with 0, not NaN
+                window = np.full((self.levels, r1 - r0, c1 - c0), np.nan, np.float32)
+                window[:len(raster.data)] = raster.data[:, sr:sr + r1 - r0, sc:sc + c1 - c0]
+                dst.write(window, window=Window(c0, r0, c1 - c0, r1 - r0))
+            yield write
+
+    def in_memory(self, *, maps: bool = True) -> LidarRoads:
+        """Everything in memory: the QA layers in ``network.qa``, the heights mosaic and
+        every tile's result (``maps`` as in :meth:`results`), for inputs that fit."""
+        if self.cue == "evidence":
+            return LidarRoads(self.network, None, evidence=self.evidence, cues=self.cues,
+                              run=self.run)
+        results = list(self.results(maps=maps))
+        parts = [self.qa(r) for r in results]
+        qa = {name: _concat([p[name] for p in parts], _output_crs(self.crs))
+              for name in TILE_QA}
+        heights = (mosaic_cores([(r.tile, r.heights) for r in results], self.cell_m)
+                   if results else None)
+        network = replace(self.network, qa={**self.network.qa, **qa})
+        return LidarRoads(network, heights, results, run=self.run)
+
+
+def _mosaic_grid(tiles: list[Tile], cell_m: float, bands: int) -> tuple[Affine, tuple]:
+    """Transform and ``(rows, cols)`` of a mosaic of the tiles' cores at ``cell_m``.
+
+    Raises
+    ------
+    ValueError
+        When ``bands`` of it would take more than :data:`MOSAIC_BUDGET_BYTES`.
+    """
+    xmin = min(t.core[0] for t in tiles)
+    ymin = min(t.core[1] for t in tiles)
+    xmax = max(t.core[2] for t in tiles)
+    ymax = max(t.core[3] for t in tiles)
     transform, (rows, cols) = image_grid((xmin, ymin, xmax, ymax), cell_m)
-    bands = max(r.data.shape[0] for _, r in rasters)
     if bands * rows * cols * 4 > MOSAIC_BUDGET_BYTES:
         raise ValueError(
             f"a mosaic of the tiles over {xmax - xmin:.0f} m x {ymax - ymin:.0f} m at "
             f"{cell_m:g} m cells would take {bands * rows * cols * 4 / 2**30:.1f} GiB (budget "
             f"{MOSAIC_BUDGET_BYTES / 2**30:.0f} GiB): the cloud's points lie far apart; split "
             "the file by area or choose a coarser cell")
-    mosaic = np.full((bands, rows, cols), np.nan, np.float32)
+    return transform, (rows, cols)
+
+
+def _core_window(tile: Tile, raster: GeoRaster, transform: Affine, shape: tuple,
+                 cell_m: float) -> tuple[tuple, tuple]:
+    """Where a tile's raster goes in a mosaic of grid ``transform`` and ``shape``: the
+    mosaic's rows and columns ``(r0, r1, c0, c1)`` of the tile's core and the raster's
+    row and column ``(sr, sc)`` at ``(r0, c0)``."""
+    rows, cols = shape
+    r0 = int(round((transform.f - tile.core[3]) / cell_m))
+    r1 = int(round((transform.f - tile.core[1]) / cell_m))
+    c0 = int(round((tile.core[0] - transform.c) / cell_m))
+    c1 = int(round((tile.core[2] - transform.c) / cell_m))
+    sr = int(round((raster.transform.f - tile.core[3]) / cell_m))
+    sc = int(round((tile.core[0] - raster.transform.c) / cell_m))
+    r1 = min(r1, rows, r0 + raster.data.shape[1] - sr)
+    c1 = min(c1, cols, c0 + raster.data.shape[2] - sc)
+    return (r0, r1, c0, c1), (sr, sc)
+
+
+def mosaic_cores(rasters: list[tuple[Tile, GeoRaster]], cell_m: float) -> GeoRaster:
+    """One raster over all tiles (per-tile rasters such as ground heights or intensity
+    images, bands padded with NaN to the most levels), each cell taken from the tile whose
+    core holds it. Tile grids are aligned to multiples of ``cell_m`` (see
+    :func:`ground_and_intensity`)."""
+    bands = max(r.data.shape[0] for _, r in rasters)
+    transform, shape = _mosaic_grid([t for t, _ in rasters], cell_m, bands)
+    mosaic = np.full((bands, *shape), np.nan, np.float32)
     for tile, raster in rasters:  # one copy per tile
-        r0 = int(round((transform.f - tile.core[3]) / cell_m))
-        r1 = int(round((transform.f - tile.core[1]) / cell_m))
-        c0 = int(round((tile.core[0] - transform.c) / cell_m))
-        c1 = int(round((tile.core[2] - transform.c) / cell_m))
-        sr = int(round((raster.transform.f - tile.core[3]) / cell_m))
-        sc = int(round((tile.core[0] - raster.transform.c) / cell_m))
-        r1 = min(r1, rows, r0 + raster.data.shape[1] - sr)
-        c1 = min(c1, cols, c0 + raster.data.shape[2] - sc)
+        (r0, r1, c0, c1), (sr, sc) = _core_window(tile, raster, transform, shape, cell_m)
         mosaic[:raster.data.shape[0], r0:r1, c0:c1] = \
             raster.data[:, sr:sr + r1 - r0, sc:sc + c1 - c0]
     return GeoRaster(mosaic, transform, rasters[0][1].crs)
