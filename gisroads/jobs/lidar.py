@@ -24,13 +24,13 @@ from ..lidar.hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, T_BD
                                 likelihood_maps, road_hypotheses)
 from ..lidar.intensity import write_intensity_images
 from ..lidar.mincover import A, D_MAX, SEED_STEP_M, exact_min_cover, greedy_min_cover
+from ..lidar.roads import rectangles_to_roads
 from ..lidar.pipeline import (EVIDENCE_THRESHOLD, TiledRoads, auto_cell_m,
                               edges_and_segments, evidence_raster, extract_roads,
                               ground_and_intensity)
 from ..lidar.tagging import ground_level_heights, tag_road_points
 from ..lidar.tilestore import inputs_crs, las_inputs
 from ..progress import Progress, report, scaled
-from ..vectorize.ribbons import rectangles_to_network
 from .common import _layer, _warn_if_empty, _warn_if_no_road, network_summary, stage_default
 
 
@@ -325,7 +325,7 @@ def rectangles_network_job(rectangles_path, out_path) -> dict:
     if missing:
         raise GisroadsError(f"{rectangles_path}: the rectangles need fields "
                             f"{sorted(missing)}")
-    network = rectangles_to_network(rectangles)
+    network = rectangles_to_roads(rectangles)
     network.qa = {"rectangles": rectangles}
     write_geopackage(out_path, network.layers())
     _warn_if_no_road(network, rectangles_path)

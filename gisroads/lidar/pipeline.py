@@ -40,7 +40,6 @@ from ..parallel import NOT_KEPT, for_each_result, keep_result, kept_result
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.rasters import raster_to_network
-from ..vectorize.ribbons import rectangles_to_network, ribbons_to_network
 from .evidence import (CAR_PARK_FLANK_SHARE, SHORE_FLANK_SHARE, dropout_cells, road_evidence,
                        vehicle_cells, without_flanked_roads)
 from .ground import GroundPlanes, ground_planes
@@ -48,6 +47,7 @@ from .hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, likelihood_
                          road_hypotheses)
 from .intensity import IntensityImages, auto_cell_m, image_grid, intensity_images
 from .mincover import greedy_min_cover
+from .roads import lines_to_network, rectangle_lines
 from .tagging import level_heights
 from .tiles import Tile, stitch_tiles
 from .tilestore import TileStore, digest, inputs_crs, las_inputs, open_store
@@ -183,7 +183,7 @@ def extract_tile(cloud: PointCloud, tile: Tile, *, cell_m: float = 0.5,
         rectangles.append(selected.assign(level=level))
         likelihood.append(maps)
     rectangles = _concat(rectangles, cloud.crs)
-    lines = rectangles_to_network(rectangles, method=METHOD).centrelines
+    lines = rectangle_lines(rectangles)
     report(progress, 1.0, "tile done")
     # a centre line takes the ground level of the rectangle nearest to its middle
     middles = shapely.line_interpolate_point(lines.geometry.values, 0.5, normalized=True)
@@ -433,7 +433,7 @@ def _evidence_roads(path, *, threshold: float, network_options: dict | None,
     likelihood, flanks, used, _ = evidence_raster(
         path, progress=scaled(progress, 0.0, 0.6), _run=run, **raster_options)
     if likelihood is None:
-        network = ribbons_to_network(_no_lines(working), method=EVIDENCE_METHOD)
+        network = lines_to_network(_no_lines(working), method=EVIDENCE_METHOD)
     else:
         options = {**EVIDENCE_NETWORK_OPTIONS, **(network_options or {})}
         network = raster_to_network(likelihood, threshold=threshold, method=EVIDENCE_METHOD,
@@ -595,7 +595,9 @@ def _stitched_network(pieces: list[tuple[Tile, gpd.GeoDataFrame]], crs) -> RoadN
     :func:`gisroads.io.las.cloud_crs` gives."""
     working, _ = crs
     lines = stitch_tiles(pieces) if pieces else _no_lines(working).assign(level=0)
-    network = ribbons_to_network(lines, method=METHOD)
+    cores = np.array([tile.core for tile, _ in pieces]).reshape(-1, 4)
+    network = lines_to_network(lines, method=METHOD, extent=(
+        (*cores[:, :2].min(axis=0), *cores[:, 2:].max(axis=0)) if len(cores) else None))
     network.polygons = _with_level(network.polygons,
                                    shapely.point_on_surface(network.polygons.geometry.values),
                                    lines)

@@ -484,7 +484,9 @@ class _JunctionSearch:
                 # road comes closest
                 nearest = shapely.get_coordinates(
                     shapely.shortest_line(shapely.points(p), line))[-1]
-                if np.hypot(*(nearest - p)) > _EPS_M:
+                # not a road running beside it: two parallel roads are no junction
+                if (np.hypot(*(nearest - p)) > _EPS_M
+                        and self._crosses(d, line, nearest)):
                     found.append(self._end_road(end, target, nearest, False))
         built = np.fromiter(self.built, dtype=np.int64, count=len(self.built))
         built_lines = np.array(list(self.built.values()), dtype=object)

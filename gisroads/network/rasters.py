@@ -32,6 +32,9 @@ road evidence or the imagery road cue of this project. The stages, each callable
     raster's own road probability along it (sub-threshold evidence plays the part of the
     paper's occlusion share), and chosen by the integer program: a road cut by a tree, a
     car or a bridge shadow is bridged when its continuation is smooth.
+:func:`parts_to_network`
+    Road parts of any cue (these skeleton parts, the LiDAR rectangles' chained centre
+    lines) through :func:`link_gaps` and the network generation below.
 :func:`raster_to_network`
     The composition, ending in the network generation of
     :mod:`gisroads.network.junctions`: junctions built from the remaining dead ends (T
@@ -558,6 +561,62 @@ def _clip_to_extent(network: RoadNetwork, extent) -> None:
         extent, network.junctions.geometry.values)].reset_index(drop=True)
 
 
+def parts_to_network(parts: gpd.GeoDataFrame, *, extent, crs, method: str = METHOD,
+                     probability: GeoRaster | None = None, unsupported=None,
+                     gap_options: dict | None = None, weight_options: dict | None = None,
+                     network_options: dict | None = None,
+                     progress: Progress = None) -> RoadNetwork:
+    """Road parts (centre lines of road pieces, from a raster or from any other cue) to
+    the road-network contract: the network stage every method ends in.
+
+    Gaps between dead ends bridged by the integer program (:func:`link_gaps`), isolated
+    short pieces dropped (:func:`drop_blobs`), then junctions built, duplicates removed,
+    insignificant components dropped and lines split at junctions
+    (:func:`gisroads.network.junctions.strings_to_network`), and the result clipped to
+    ``extent``.
+
+    Parameters
+    ----------
+    parts : GeoDataFrame
+        LineStrings in a metre CRS with ``part_id``, ``width_m`` (metres) and ``quality``
+        (0-1).
+    extent : (xmin, ymin, xmax, ymax)
+        Where the cue was observed, metres: the border rule of the significance check, and
+        the network is clipped to it.
+    crs
+        The parts' CRS.
+    method : str
+        The ``method`` of every centre line.
+    probability : GeoRaster, optional
+        A road probability raster: the context of the gap edges (see :func:`link_gaps`).
+    unsupported : callable, optional
+        ``unsupported(lines) -> metres`` of each candidate junction connection that the cue
+        does not show as road (see :func:`gisroads.network.junctions.find_junctions`).
+    gap_options, weight_options : dict, optional
+        See :func:`link_gaps`.
+    network_options : dict, optional
+        Keyword arguments of :func:`gisroads.network.junctions.strings_to_network`
+        (updating :data:`NETWORK_OPTIONS`).
+    progress : callable, optional
+
+    Returns
+    -------
+    RoadNetwork
+        QA layers ``gap_edges`` and ``junction_connections``.
+    """
+    report(progress, 0.0, "linking gaps")
+    gaps, strings = link_gaps(parts, probability, gap_options=gap_options,
+                              weight_options=weight_options)
+    strings, blobs = drop_blobs(strings)
+    network, _ = strings_to_network(strings, extent=extent, crs=crs, method=method,
+                                    progress=scaled(progress, 0.25, 1.0),
+                                    unsupported=unsupported,
+                                    **{**NETWORK_OPTIONS, **(network_options or {})})
+    _clip_to_extent(network, shapely.box(*extent))
+    network.qa["gap_edges"] = gaps
+    return network
+
+
 def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = THRESHOLD,
                       method: str = METHOD, part_options: dict | None = None,
                       gap_options: dict | None = None, weight_options: dict | None = None,
@@ -577,11 +636,8 @@ def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = TH
         The ``method`` of every centre line.
     part_options : dict, optional
         Keyword arguments of :func:`skeleton_parts`.
-    gap_options, weight_options : dict, optional
-        See :func:`link_gaps`.
-    network_options : dict, optional
-        Keyword arguments of :func:`gisroads.network.junctions.strings_to_network`
-        (updating :data:`NETWORK_OPTIONS`).
+    gap_options, weight_options, network_options : dict, optional
+        See :func:`parts_to_network`.
     progress : callable, optional
         ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
 
@@ -595,18 +651,13 @@ def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = TH
     probability = road_probability(raster, band=band)
     parts = skeleton_parts(probability, threshold=threshold, **(part_options or {}),
                            progress=scaled(progress, 0.0, 0.6))
-    report(progress, 0.6, "linking gaps")
-    gaps, strings = link_gaps(parts, probability, gap_options=gap_options,
-                              weight_options=weight_options)
-    strings, blobs = drop_blobs(strings)
     low = (part_options or {}).get("low_threshold")
-    network, _ = strings_to_network(strings, extent=probability.bounds, crs=probability.crs,
-                                    method=method, progress=scaled(progress, 0.7, 1.0),
-                                    unsupported=_off_road_length(
-                                        probability, threshold if low is None else low),
-                                    **{**NETWORK_OPTIONS, **(network_options or {})})
-    _clip_to_extent(network, shapely.box(*probability.bounds))
-    network.qa["gap_edges"] = gaps
+    network = parts_to_network(
+        parts, extent=probability.bounds, crs=probability.crs, method=method,
+        probability=probability,
+        unsupported=_off_road_length(probability, threshold if low is None else low),
+        gap_options=gap_options, weight_options=weight_options,
+        network_options=network_options, progress=scaled(progress, 0.6, 1.0))
     network.qa["rejected"] = _rejected(parts.geometry.values,
                                        network.centrelines.geometry.values, probability.crs)
     return network

@@ -1,8 +1,9 @@
 """Road pieces (rectangles, ribbons) to the road-network output contract.
 
-Shared by the LiDAR minimum cover (Zhu & Mordohai's rectangles, :func:`rectangles_to_network`)
-and the ribbon snakes (centre lines with widths, :func:`ribbons_to_network`). Both go through
-the same steps:
+The ribbon snakes (centre lines with widths, :func:`ribbons_to_network`) go through the four
+steps below; the LiDAR minimum cover's rectangles (Zhu & Mordohai) through the first
+(:func:`chain_lines` of :func:`rectangle_centrelines`), then the network stage every method
+ends in (:mod:`gisroads.lidar.roads`):
 
 1. **Chain.** Pieces of similar direction that continue each other are stitched into longer
    centre lines. An end is *near* another piece when it lies within ``join_gap_m`` of that
@@ -327,6 +328,50 @@ def _weighted_mean(values, weights, labels, count) -> np.ndarray:
     return np.bincount(labels, weights=values * weights, minlength=count) / total
 
 
+def _chained(lines, widths_m, scores, *, join_gap_m: float, angle_tol_deg: float):
+    """Step 1: (chain lines, their widths and scores as length-weighted means of their
+    pieces, chain label of every piece)."""
+    chains, labels = _chain(lines, widths_m, join_gap_m=join_gap_m,
+                            angle_tol_deg=angle_tol_deg)
+    piece_length = shapely.length(lines)
+    return (chains, _weighted_mean(widths_m, piece_length, labels, len(chains)),
+            _weighted_mean(scores, piece_length, labels, len(chains)), labels)
+
+
+def chain_lines(pieces: gpd.GeoDataFrame, *, join_gap_m: float = JOIN_GAP_M,
+                angle_tol_deg: float = ANGLE_TOL_DEG,
+                min_length_m: float = MIN_LENGTH_M) -> gpd.GeoDataFrame:
+    """Step 1 alone: pieces that continue each other stitched into centre lines.
+
+    Parameters
+    ----------
+    pieces : GeoDataFrame
+        LineStrings in a metre CRS with ``width_m`` (metres) and ``score``.
+    join_gap_m, angle_tol_deg, min_length_m : float
+        As in :func:`ribbons_to_network`.
+
+    Returns
+    -------
+    GeoDataFrame
+        One LineString per chain at least ``min_length_m`` long, with ``width_m`` and
+        ``score`` (means of its pieces weighted by their length); not noded: crossing
+        chains are left for the network stage (:mod:`gisroads.network`).
+    """
+    lines = np.asarray(pieces.geometry.values, dtype=object)
+    usable = shapely.length(lines) > 0
+    if not usable.any():
+        return gpd.GeoDataFrame({"width_m": np.empty(0), "score": np.empty(0)},
+                                geometry=gpd.GeoSeries([], crs=pieces.crs), crs=pieces.crs)
+    chains, width, score, _ = _chained(
+        lines[usable], pieces["width_m"].to_numpy(float)[usable],
+        pieces["score"].to_numpy(float)[usable], join_gap_m=join_gap_m,
+        angle_tol_deg=angle_tol_deg)
+    kept = shapely.length(chains) >= min_length_m
+    return gpd.GeoDataFrame({"width_m": width[kept], "score": score[kept]},
+                            geometry=gpd.GeoSeries(chains[kept], crs=pieces.crs),
+                            crs=pieces.crs)
+
+
 # --- 2. snap ------------------------------------------------------------------------------
 
 def _insert_vertex(xy: np.ndarray, point: np.ndarray) -> np.ndarray:
@@ -482,11 +527,8 @@ def _pieces_to_network(lines, widths_m, scores, areas, crs, *, method: str, join
     lines, widths_m, scores, areas = lines[usable], widths_m[usable], scores[usable], areas[usable]
     if len(lines) == 0:
         return _empty_network(crs, method, qa)
-    chains, labels = _chain(lines, widths_m, join_gap_m=join_gap_m,
-                            angle_tol_deg=angle_tol_deg)
-    piece_length = shapely.length(lines)
-    chain_width = _weighted_mean(widths_m, piece_length, labels, len(chains))
-    chain_score = _weighted_mean(scores, piece_length, labels, len(chains))
+    chains, chain_width, chain_score, labels = _chained(
+        lines, widths_m, scores, join_gap_m=join_gap_m, angle_tol_deg=angle_tol_deg)
     kept = shapely.length(chains) >= min_length_m
     if not kept.any():
         return _empty_network(crs, method, qa)
@@ -520,51 +562,6 @@ def _no_roads(crs, method: str, qa: dict | None) -> RoadNetwork:
     return network_from_centrelines(empty, method=method, qa=qa)
 
 
-def rectangles_to_network(rectangles: gpd.GeoDataFrame, *, method: str = "zhu-mordohai",
-                          join_gap_m: float = JOIN_GAP_M, angle_tol_deg: float = ANGLE_TOL_DEG,
-                          smooth_m: float = SMOOTH_M,
-                          min_length_m: float = MIN_LENGTH_M) -> RoadNetwork:
-    """Road network from road rectangles (the selected minimum-cover hypotheses).
-
-    Follows the four steps of the module docstring, with each rectangle's mid-line
-    (:func:`rectangle_centrelines`) as its centre line and the rectangle as its surface.
-
-    Parameters
-    ----------
-    rectangles : GeoDataFrame
-        Polygons in a metre CRS with ``width_m`` and ``theta_rad`` (road direction, radians
-        counter-clockwise from east); ``score`` is carried to the roads when present
-        (length-weighted mean), otherwise their score is NaN.
-    method : str
-        The ``method`` of every centre line.
-    join_gap_m : float
-        Metres; ends this close to another piece's centre line continue it; T-junction ends
-        reach this far beyond a road's half width.
-    angle_tol_deg : float
-        Degrees; pieces this close in direction may continue each other, lines farther
-        apart form junctions.
-    smooth_m : float
-        Metres; radius of the closing applied to the union of the rectangles.
-    min_length_m : float
-        Metres; shorter chains, and shorter isolated roads, are dropped.
-
-    Returns
-    -------
-    RoadNetwork
-        The contract layers plus the QA layer ``rectangles`` (the input).
-    """
-    crs = rectangles.crs
-    if len(rectangles) == 0:
-        return _no_roads(crs, method, {"rectangles": rectangles.copy()})
-    score = (rectangles["score"].to_numpy(float) if "score" in rectangles
-             else np.full(len(rectangles), np.nan))
-    return _pieces_to_network(
-        rectangle_centrelines(rectangles), rectangles["width_m"].to_numpy(float), score,
-        list(rectangles.geometry.values), crs, method=method, join_gap_m=join_gap_m,
-        angle_tol_deg=angle_tol_deg, smooth_m=smooth_m, min_length_m=min_length_m,
-        qa={"rectangles": rectangles.copy()})
-
-
 def ribbons_to_network(centrelines: gpd.GeoDataFrame, *, method: str,
                        join_gap_m: float = JOIN_GAP_M, angle_tol_deg: float = ANGLE_TOL_DEG,
                        smooth_m: float = SMOOTH_M, min_length_m: float = MIN_LENGTH_M,
@@ -584,8 +581,16 @@ def ribbons_to_network(centrelines: gpd.GeoDataFrame, *, method: str,
         segment widths.
     method : str
         The ``method`` of every centre line.
-    join_gap_m, angle_tol_deg, smooth_m, min_length_m : float
-        As in :func:`rectangles_to_network`.
+    join_gap_m : float
+        Metres; ends this close to another piece's centre line continue it; T-junction ends
+        reach this far beyond a road's half width.
+    angle_tol_deg : float
+        Degrees; pieces this close in direction may continue each other, lines farther
+        apart form junctions.
+    smooth_m : float
+        Metres; radius of the closing applied to the union of the pieces' areas.
+    min_length_m : float
+        Metres; shorter chains, and shorter isolated roads, are dropped.
     qa : dict of GeoDataFrame, optional
         QA layers stored beside the contract layers.
 

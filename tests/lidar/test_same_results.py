@@ -103,6 +103,7 @@ def fusa_stages(path: Path) -> dict:
         "likelihood_sum": float(np.nansum(maps.data, dtype=np.float64)),
         "selected_hyp_ids": selected["hyp_id"].astype(int).tolist(),
         "roads": len(network.centrelines),
+        "junctions": len(network.junctions),
         "length_m": float(network.centrelines.length.sum()),
         "completeness": scores.completeness,
         "correctness": scores.correctness,
@@ -114,7 +115,7 @@ def test_fusa_stages_are_the_pinned_figures_in_either_environment(lidar_dir):
     got = fusa_stages(lidar_dir / "fusa.laz")
     expected = json.loads(EXPECTED.read_text())
     exact = ("image_cells_with_data", "segment_sizes", "segment_of_every_1000th_cell",
-             "hypotheses", "selected_hyp_ids", "roads")
+             "hypotheses", "selected_hyp_ids", "roads", "junctions")
     for key in exact:
         assert got[key] == expected[key], key
     for key in ("image_sum", "magnitude_sum", "orientation_sum", "likelihood_sum"):
