@@ -24,13 +24,15 @@ def t_mask():
     return mask
 
 
-def test_geographic_mask_gives_one_t_junction_and_bridges_the_cut(qgis_process, tmp_path):
+def test_geographic_mask_gives_one_t_junction_and_closes_the_cut(qgis_process, tmp_path):
     # about 0.5 m pixels near 45 N, in degrees
     raster = write_mask(tmp_path / "roads.tif", t_mask(),
                         from_origin(15.0, 45.0, 0.5 / 78_850, 0.5 / 111_130), "EPSG:4326")
     out = tmp_path / "network.gpkg"
     result = qgis_process.run("roadrastertonetwork", INPUT=raster, THRESHOLD=0.5, OUTPUT=out)
-    assert result["JUNCTIONS"] == 1 and result["GAPS_BRIDGED"] == 1
+    # the raster's cut repair closes the 6 m cut before the skeleton (no gap edge left to
+    # bridge); an open cut would leave the stem's far piece as a fourth road
+    assert result["JUNCTIONS"] == 1 and result["GAPS_BRIDGED"] == 0
     assert result["ROADS"] == 3
     assert result["LENGTH_M"] == pytest.approx(300.0, rel=0.05)
     assert set(list_layers(out)) >= {"road_centrelines", "road_polygons", "junctions",
