@@ -174,6 +174,8 @@ def raster_info(path) -> dict:
     (None), not GDAL's pixel-grid stand-ins.
     """
     path = Path(path)
+    if not path.exists():
+        raise RasterError(f"{path}: no such file")
     try:
         with _opened(path) as src:
             crs = _crs(src.crs)

@@ -48,5 +48,6 @@ def test_unreadable_raster(tmp_path):
     (tmp_path / "x.tif").write_bytes(b"garbage" * 50)
     with pytest.raises(RasterError, match="not a readable raster"):
         read_raster(tmp_path / "x.tif")
-    with pytest.raises(RasterError, match="no such file"):
-        read_raster(tmp_path / "missing.tif")
+    for read in (read_raster, raster_info):
+        with pytest.raises(RasterError, match="missing.tif: no such file$"):
+            read(tmp_path / "missing.tif")
