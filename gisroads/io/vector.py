@@ -18,6 +18,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import geopandas as gpd
+import pandas as pd
 
 from ..errors import MissingFileError
 from ..geo import CONTRACT_GEOMETRY
@@ -149,15 +150,23 @@ class GeoPackageWriter:
         Target ``.gpkg``; replaced whole if it exists.
     styles_dir : Path
         Folder of ``<layer>.qml`` styles.
+    batch_features : int
+        Appended features are written in batches of at least this many (held until
+        then): every write to a GeoPackage is a transaction, synced to disk, and updates
+        the spatial index feature by feature, so many small appends cost several times the
+        same features in a few batches (measured: 20 appends of 5 000 polygons 2.9 s,
+        one of 100 000 0.46 s).
     """
 
-    def __init__(self, path, *, styles_dir: Path = STYLES_DIR):
+    def __init__(self, path, *, styles_dir: Path = STYLES_DIR, batch_features: int = 100_000):
         self.path = Path(path)
         if self.path.suffix.lower() != ".gpkg":
             raise ValueError(f"{self.path}: a GeoPackage path must end in .gpkg")
         self.styles_dir = styles_dir
         self._written: dict[str, int] = {}  # layer -> features
         self._empty: dict[str, gpd.GeoDataFrame] = {}  # appended-to layers with no feature yet
+        self._pending: dict[str, list[gpd.GeoDataFrame]] = {}  # appended, not yet written
+        self.batch_features = batch_features
         self._atomic = None
         self._tmp: Path | None = None
 
@@ -182,7 +191,19 @@ class GeoPackageWriter:
                 self._empty.setdefault(name, frame)
             return
         self._empty.pop(name, None)
-        self._to_file(name, frame, "a" if name in self._written else "w")
+        if name not in self._written:  # created at once: the layers keep their order
+            self._to_file(name, frame, "w")
+            return
+        pending = self._pending.setdefault(name, [])
+        pending.append(frame)
+        if sum(map(len, pending)) >= self.batch_features:
+            self._flush(name)
+
+    def _flush(self, name: str) -> None:
+        pending = self._pending.pop(name, [])
+        if pending:
+            self._to_file(name, pending[0] if len(pending) == 1
+                          else pd.concat(pending, ignore_index=True), "a")
 
     def _to_file(self, name: str, frame: gpd.GeoDataFrame, mode: str) -> None:
         with warnings.catch_warnings():
@@ -196,6 +217,8 @@ class GeoPackageWriter:
     def __exit__(self, kind, error, traceback) -> bool:
         if kind is None:
             try:
+                for name in list(self._pending):
+                    self._flush(name)
                 for name, frame in list(self._empty.items()):
                     self._to_file(name, frame, "w")
                 self._finish()

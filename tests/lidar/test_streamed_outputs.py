@@ -129,3 +129,13 @@ def test_a_geopackage_written_part_by_part(tmp_path):
             raise RuntimeError("cancelled")
     assert len(read_layer(out, "junctions")) == 2
     assert [p.name for p in tmp_path.iterdir()] == ["parts.gpkg"]
+    # appends held and written in batches of at least 3 features, in their order
+    with GeoPackageWriter(out, batch_features=3) as gpkg:
+        for y in range(6):
+            gpkg.append("rectangles", points(2, y))
+            gpkg.append("hypotheses", points(1, y))
+    assert list_layers(out) == ["rectangles", "hypotheses"]
+    rectangles = read_layer(out, "rectangles")
+    assert rectangles.geometry.y.tolist() == [y for y in range(6) for _ in range(2)]
+    assert rectangles.level.tolist() == [0, 1] * 6
+    assert read_layer(out, "hypotheses").geometry.y.tolist() == list(range(6))
