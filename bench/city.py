@@ -36,7 +36,7 @@ def _run(cloud: str, work: str, out: str, workers: int) -> dict:
     from gisroads.lidar.tilestore import open_store
 
     start = time.perf_counter()
-    store = open_store(cloud, work)
+    store = open_store(cloud, work, workers=workers)
     read_s = time.perf_counter() - start
     result = lidar_job(cloud, out, work_dir=work, workers=workers)
     total_s = time.perf_counter() - start

@@ -222,8 +222,8 @@ def _cloud_from_points(points, crs, source_crs, units: LasUnits) -> PointCloud:
 
 
 def iter_las_chunks(path, *, chunk_size: int = DEFAULT_CHUNK,
-                    bbox: tuple[float, float, float, float] | None = None
-                    ) -> Iterator[PointCloud]:
+                    bbox: tuple[float, float, float, float] | None = None,
+                    start: int = 0, stop: int | None = None) -> Iterator[PointCloud]:
     """Stream a LAS/LAZ file as :class:`PointCloud` chunks, so any file size fits in memory.
 
     Parameters
@@ -233,6 +233,9 @@ def iter_las_chunks(path, *, chunk_size: int = DEFAULT_CHUNK,
         Points decoded at a time.
     bbox : (xmin, ymin, xmax, ymax), optional
         In metres of the working CRS; only points inside are yielded (empty chunks skipped).
+    start, stop : int, optional
+        Only the points ``start:stop`` of the file, in its order (a LAZ file is decoded
+        from the compressed chunk holding ``start``, not from its beginning).
 
     Raises
     ------
@@ -244,7 +247,15 @@ def iter_las_chunks(path, *, chunk_size: int = DEFAULT_CHUNK,
         units = las_units(reader.header, source_crs)
         crs = metre_crs(source_crs, units)
         try:
-            for points in reader.chunk_iterator(chunk_size):
+            left = reader.header.point_count if stop is None else stop
+            left = min(left, reader.header.point_count) - start
+            if start:
+                reader.seek(start)
+            while left > 0:
+                points = reader.read_points(min(chunk_size, left))
+                if len(points) == 0:
+                    break
+                left -= len(points)
                 cloud = _cloud_from_points(points, crs, source_crs, units)
                 if bbox is not None:
                     x, y = cloud.xyz[:, 0], cloud.xyz[:, 1]

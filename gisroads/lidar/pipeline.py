@@ -381,8 +381,8 @@ def evidence_raster(path, *, tile_m: float = 300.0, overlap_m: float = 100.0,
     -------
     EvidenceMosaic
     """
-    store = open_store(path, work_dir, tile_m=tile_m, overlap_m=overlap_m,
-                       progress=scaled(progress, 0.0, 0.1))
+    store = open_store(path, work_dir, tile_m=tile_m, overlap_m=overlap_m, workers=workers,
+                       scheduler=scheduler, progress=scaled(progress, 0.0, 0.1))
     try:
         return _evidence_from_store(store, cell_m=cell_m, min_points=min_points,
                                     workers=workers, scheduler=scheduler, work_dir=work_dir,
@@ -539,6 +539,7 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
                            evidence=roads.evidence, cues=roads.cues, run=roads.run)
     else:
         store = open_store(path, work_dir, tile_m=tile_m, overlap_m=overlap_m,
+                           workers=workers, scheduler=scheduler,
                            progress=scaled(progress, 0.0, 0.1))
         try:
             tiled = _intensity_roads(store, cell_m=cell_m, min_points=min_points, options=dict(

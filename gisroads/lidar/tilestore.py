@@ -10,7 +10,14 @@ cells and keeps the points inside its bounds (edges included, as ``read_las(bbox
 Each point is stored once however many tiles hold it, and the points of several files that
 overlap fall into the same cells: a tile over two files sees both.
 
-Memory stays flat: the pass holds one chunk, a tile read holds one tile and one cell.
+The pass is cut into *parts* of :data:`PART_POINTS` consecutive points of one file, which
+run as tasks like the tiles (:func:`gisroads.parallel.for_each_result`: in this process, or
+one per worker at a time), each decoding its own range of the file (a LAZ file from the
+compressed chunk holding its first point) into its own cell files. The parts do not depend
+on the number of workers, and a cell's points are its parts' files read in their order: the
+store, and every tile's points in their order, are the same however many workers read it.
+
+Memory stays flat: a part holds one chunk, a tile read holds one tile and one cell.
 The store lives in a folder (``work_dir``) under a key of the inputs (path, size, mtime)
 and the grid; it appears under its name only once complete (built in a temporary folder,
 then renamed), so a killed pass leaves nothing that a later run would trust.
@@ -27,6 +34,7 @@ import os
 import shutil
 import tempfile
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +51,9 @@ RECORD = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<u2"
 """``index``: the point's position in the inputs (file after file, in their sorted order),
 which classifies points back into a copy of the file."""
 LAS_SUFFIXES = (".las", ".laz")
-STORE_VERSION = 2
+STORE_VERSION = 3
+#: Points of the input one task of the reading pass decodes and buckets.
+PART_POINTS = 4_000_000
 
 
 def las_inputs(source) -> list[Path]:
@@ -102,8 +112,8 @@ def inputs_crs(paths: list[Path]) -> tuple[CRS | None, CRS | None]:
     return first
 
 
-def _cell_name(row: int, col: int) -> str:
-    return f"{row}_{col}.bin"
+def _cell_name(row: int, col: int, part: int) -> str:
+    return f"{row}_{col}.{part}.bin"
 
 
 @dataclass
@@ -121,6 +131,8 @@ class TileStore:
     tile_m, overlap_m : float
     crs : (working CRS, file CRS)
     cells : dict (row, col) -> number of points
+    parts : dict (row, col) -> tuple of int
+        The parts of the reading pass that hold points of the cell, in order.
     key : str
         Hash of the inputs and the grid: what a result computed from this store is keyed by.
     """
@@ -133,6 +145,7 @@ class TileStore:
     overlap_m: float
     crs: tuple[CRS | None, CRS | None]
     cells: dict
+    parts: dict
     key: str
     temporary: Path | None = None
     """The temporary folder holding the store, when no work folder was given."""
@@ -177,8 +190,14 @@ class TileStore:
         """``(index, cloud)`` of every stored cell (or of ``cells``), row by row: the points
         of the cell and their positions in the inputs (:data:`RECORD`)."""
         for r, c in sorted(self.cells if cells is None else cells):
-            points = np.fromfile(self.folder / "cells" / _cell_name(r, c), RECORD)
+            points = self._cell(r, c)
             yield np.ascontiguousarray(points["index"]), self._cloud(points)
+
+    def _cell(self, row: int, col: int) -> np.ndarray:
+        """The records of a cell: those of each part holding it, in the parts' order."""
+        parts = [np.fromfile(self.folder / "cells" / _cell_name(row, col, part), RECORD)
+                 for part in self.parts[(row, col)]]
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
     def _cloud(self, points: np.ndarray) -> PointCloud:
         xyz = np.empty((len(points), 3))
@@ -200,7 +219,7 @@ class TileStore:
             for c in range(tile.col, tile.col + self.reach):
                 if (r, c) not in self.cells:
                     continue
-                points = np.fromfile(self.folder / "cells" / _cell_name(r, c), RECORD)
+                points = self._cell(r, c)
                 keep = ((points["x"] >= xmin) & (points["y"] >= ymin)
                         & (points["x"] <= xmax) & (points["y"] <= ymax))
                 if keep.any():
@@ -226,18 +245,22 @@ def _manifest(store: TileStore) -> dict:
     return {"version": STORE_VERSION, "inputs": [str(p) for p in store.inputs],
             "extent": list(store.extent), "point_count": store.point_count,
             "tile_m": store.tile_m, "overlap_m": store.overlap_m, "key": store.key,
-            "cells": [[r, c, n] for (r, c), n in sorted(store.cells.items())]}
+            "cells": [[r, c, n, list(store.parts[(r, c)])]
+                      for (r, c), n in sorted(store.cells.items())]}
 
 
 def _load(folder: Path, paths: list[Path], crs) -> TileStore:
     manifest = json.loads((folder / "manifest.json").read_text())
     return TileStore(folder, paths, tuple(manifest["extent"]), manifest["point_count"],
                      manifest["tile_m"], manifest["overlap_m"], crs,
-                     {(r, c): n for r, c, n in manifest["cells"]}, manifest["key"])
+                     {(r, c): n for r, c, n, _ in manifest["cells"]},
+                     {(r, c): tuple(parts) for r, c, _, parts in manifest["cells"]},
+                     manifest["key"])
 
 
 def open_store(source, work_dir=None, *, tile_m: float = 300.0, overlap_m: float = 100.0,
-               chunk_size: int = DEFAULT_CHUNK, progress: Progress = None) -> TileStore:
+               chunk_size: int = DEFAULT_CHUNK, workers: int = 1, scheduler: str | None = None,
+               progress: Progress = None) -> TileStore:
     """The tile store of ``source`` in ``work_dir``: reused when a complete store of the
     same inputs (path, size, mtime) and grid is there, else built in one streaming pass.
 
@@ -250,6 +273,11 @@ def open_store(source, work_dir=None, *, tile_m: float = 300.0, overlap_m: float
         :meth:`TileStore.remove`).
     tile_m, overlap_m : float
         The tile grid (:func:`gisroads.lidar.tiles.tile_grid`).
+    chunk_size : int
+        Points decoded at a time.
+    workers, scheduler
+        Where the parts of the reading pass run (:func:`gisroads.parallel.for_each_result`);
+        the workers of a scheduler must see ``work_dir``.
 
     Raises
     ------
@@ -278,7 +306,8 @@ def open_store(source, work_dir=None, *, tile_m: float = 300.0, overlap_m: float
     building = Path(tempfile.mkdtemp(prefix=f".store-{key}-", dir=root))
     try:
         store = _build(building, paths, infos, extent, crs, key, tile_m=tile_m,
-                       overlap_m=overlap_m, chunk_size=chunk_size, progress=progress)
+                       overlap_m=overlap_m, chunk_size=chunk_size, workers=workers,
+                       scheduler=scheduler, progress=progress)
         try:
             os.rename(building, folder)
         except OSError:  # another run finished the same store first
@@ -295,44 +324,66 @@ def open_store(source, work_dir=None, *, tile_m: float = 300.0, overlap_m: float
         raise
 
 
-def _build(folder: Path, paths, infos, extent, crs, key, *, tile_m, overlap_m, chunk_size,
-           progress) -> TileStore:
-    (folder / "cells").mkdir()
-    stride = tile_m - overlap_m
-    origin = np.array(extent[:2])
+def _bucket_part(folder: Path, origin, stride: float, chunk_size: int, part) -> dict:
+    """Decode the points ``start:stop`` of one input and append each to the file of its
+    stride cell and this part; ``{(row, col): points}``."""
+    number, path, start, stop, first_index = part
     cells: dict = {}
-    total = sum(i["point_count"] for i in infos) or 1
-    done = 0
-    for path in paths:
-        for chunk in iter_las_chunks(path, chunk_size=chunk_size):
-            report(progress, done / total, f"bucketing points into tiles ({path.name})")
-            cell = np.floor((chunk.xyz[:, :2] - origin) / stride).astype(np.int64)
-            # one key per cell, ordered row by row; points keep their file order inside
-            lo = cell.min(axis=0)
-            span = cell.max(axis=0) - lo + 1
-            flat = (cell[:, 1] - lo[1]) * span[0] + (cell[:, 0] - lo[0])
-            order = np.argsort(flat, kind="stable")
-            flat = flat[order]
-            starts = np.flatnonzero(np.r_[True, flat[1:] != flat[:-1]])
-            ends = np.r_[starts[1:], len(flat)]
-            records = np.empty(len(order), RECORD)
-            xyz = chunk.xyz[order]
-            records["x"], records["y"], records["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-            del xyz
-            records["intensity"] = chunk.intensity[order]
-            records["index"] = done + order
-            for name in ("classification", "return_number", "number_of_returns"):
-                records[name] = getattr(chunk, name)[order]
-            for s, e in zip(starts, ends):  # one write per cell the chunk touches
-                col = int(flat[s] % span[0] + lo[0])
-                row = int(flat[s] // span[0] + lo[1])
-                with open(folder / "cells" / _cell_name(row, col), "ab") as f:
-                    records[s:e].tofile(f)
-                cells[(row, col)] = cells.get((row, col), 0) + int(e - s)
-            done += len(chunk)
+    done = first_index
+    for chunk in iter_las_chunks(path, chunk_size=chunk_size, start=start, stop=stop):
+        cell = np.floor((chunk.xyz[:, :2] - origin) / stride).astype(np.int64)
+        # one key per cell, ordered row by row; points keep their file order inside
+        lo = cell.min(axis=0)
+        span = cell.max(axis=0) - lo + 1
+        flat = (cell[:, 1] - lo[1]) * span[0] + (cell[:, 0] - lo[0])
+        order = np.argsort(flat, kind="stable")
+        flat = flat[order]
+        starts = np.flatnonzero(np.r_[True, flat[1:] != flat[:-1]])
+        ends = np.r_[starts[1:], len(flat)]
+        records = np.empty(len(order), RECORD)
+        for axis, name in enumerate("xyz"):
+            records[name] = chunk.xyz[order, axis]
+        records["intensity"] = chunk.intensity[order]
+        records["index"] = done + order
+        for name in ("classification", "return_number", "number_of_returns"):
+            records[name] = getattr(chunk, name)[order]
+        for s, e in zip(starts, ends):  # one write per cell the chunk touches
+            col = int(flat[s] % span[0] + lo[0])
+            row = int(flat[s] // span[0] + lo[1])
+            with open(folder / "cells" / _cell_name(row, col, number), "ab") as f:
+                records[s:e].tofile(f)
+            cells[(row, col)] = cells.get((row, col), 0) + int(e - s)
+        done += len(chunk)
+    return cells
+
+
+def _build(folder: Path, paths, infos, extent, crs, key, *, tile_m, overlap_m, chunk_size,
+           workers, scheduler, progress) -> TileStore:
+    from ..parallel import for_each_result
+
+    (folder / "cells").mkdir()
+    parts, first_index = [], 0
+    for path, info in zip(paths, infos):
+        count = info["point_count"]
+        for start in range(0, count, PART_POINTS):
+            parts.append((len(parts), path, start, min(start + PART_POINTS, count),
+                          first_index + start))
+        first_index += count
+    cells: dict = {}
+    holding: dict = {}
+
+    def bucketed(number, counts):
+        for cell, n in counts.items():
+            cells[cell] = cells.get(cell, 0) + n
+            holding.setdefault(cell, []).append(number)
+    report(progress, 0.0, f"bucketing {first_index} points into tiles")
+    for_each_result(partial(_bucket_part, folder, np.array(extent[:2]), tile_m - overlap_m,
+                            chunk_size), parts, bucketed, workers=workers,
+                    scheduler=scheduler, progress=progress, what="parts of the input read")
     report(progress, 1.0, "points bucketed")
     store = TileStore(folder, list(paths), extent, int(sum(cells.values())), float(tile_m),
-                      float(overlap_m), crs, cells, key)
+                      float(overlap_m), crs, cells,
+                      {cell: tuple(sorted(numbers)) for cell, numbers in holding.items()}, key)
     manifest = folder / "manifest.json.tmp"
     manifest.write_text(json.dumps(_manifest(store)))
     os.replace(manifest, folder / "manifest.json")  # the store is complete

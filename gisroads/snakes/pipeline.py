@@ -569,6 +569,7 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
 
     lines, working = _map_in_cloud_crs(cloud_path, map_lines)
     store = open_store(cloud_path, work_dir, tile_m=PATCH_CELL_M, overlap_m=0.0,
+                       workers=workers, scheduler=scheduler,
                        progress=scaled(progress, 0.0, 0.1))
     try:
         registered = _register(store, cloud_path, lines, snap_m,

@@ -71,18 +71,43 @@ def test_a_pass_that_fails_midway_leaves_no_store(cloud, tmp_path, monkeypatch):
 
 
 def test_the_input_is_decoded_once_whatever_the_tile_count(cloud, monkeypatch):
-    reads = []
+    decoded = []
     real = tilestore.iter_las_chunks
 
     def counting(path, **kw):
-        reads.append(path)
-        return real(path, **kw)
+        for chunk in real(path, **kw):
+            decoded.append(len(chunk))
+            yield chunk
 
     monkeypatch.setattr(tilestore, "iter_las_chunks", counting)
+    monkeypatch.setattr(tilestore, "PART_POINTS", 70_000)  # the pass in several parts
     roads = extract_roads(cloud, cue="evidence", tile_m=200.0, overlap_m=50.0)
     assert roads.run["tiles"] == 15  # 5 x 3 tiles of 200 m every 150 m
-    assert len(reads) == 1
+    assert sum(decoded) == len(read_las(cloud))
     assert roads.network.centrelines.length.sum() > 2000
+
+
+def test_parts_read_on_workers_give_the_store_of_one_pass(cloud, tmp_path, monkeypatch):
+    # parts of 70 000 points: a LAZ file decoded from inside its compressed chunks
+    monkeypatch.setattr(tilestore, "PART_POINTS", 70_000)
+    whole = read_las(cloud)
+    assert len(whole) > 3 * 70_000
+    here = open_store(cloud, tmp_path / "here", chunk_size=30_000)
+    on_workers = open_store(cloud, tmp_path / "workers", chunk_size=30_000, workers=2)
+    assert here.cells == on_workers.cells and here.parts == on_workers.parts
+    assert max(len(parts) for parts in here.parts.values()) > 1
+    every = np.concatenate([index for index, _ in here.iter_cells()])
+    np.testing.assert_array_equal(np.sort(every), np.arange(len(whole)))
+    for tile in here.tiles:
+        a, b = here.read(tile), on_workers.read(tile)
+        np.testing.assert_array_equal(a.xyz, b.xyz)
+        np.testing.assert_array_equal(a.intensity, b.intensity)
+        direct = read_las(cloud, bbox=tile.bounds)
+        # the points of a cell keep the file's order
+        np.testing.assert_array_equal(_sorted_rows(a), _sorted_rows(direct))
+    for index, points in here.iter_cells():  # in the file's order, the file's points
+        assert np.all(np.diff(index) > 0)
+        np.testing.assert_array_equal(points.xyz, whole.xyz[index])
 
 
 def test_a_folder_a_glob_and_a_list_of_tiles_give_the_network_of_the_merged_file(
