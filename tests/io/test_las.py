@@ -65,6 +65,25 @@ def test_chunked_reading_equals_whole_and_bbox_filters(lidar_dir):
     assert len(part) == inside.sum() > 5000
 
 
+@pytest.mark.parametrize("name", ["fusa.laz", "test_semis_2023_0292_6833_LA93_IGN69.laz",
+                                  "las_with_several_extra_byte_bloc.laz"])
+def test_kept_fields_decode_as_in_the_file_and_ranges_join_into_it(lidar_dir, name):
+    # point formats 1, 6 (with GPS time, scan angle...) and 8 (colours, extra bytes): only
+    # the layers a cloud keeps are decoded
+    path = lidar_dir / name
+    raw = laspy.read(path)
+    whole = read_las(path)
+    for field in ("classification", "return_number", "number_of_returns", "intensity"):
+        np.testing.assert_array_equal(getattr(whole, field), np.asarray(raw[field]))
+    np.testing.assert_allclose(whole.xyz, np.column_stack([raw.x, raw.y, raw.z]))
+    # ranges of the file, decoded from inside its compressed chunks, join into the whole
+    cuts = [0, 12_345, 100_000, 100_001, len(whole)]
+    parts = [c.xyz for a, b in zip(cuts, cuts[1:])
+             for c in iter_las_chunks(path, start=a, stop=b, chunk_size=30_000)]
+    assert [len(p) for p in parts[:2]] == [12_345, 30_000]
+    np.testing.assert_array_equal(np.concatenate(parts), whole.xyz)
+
+
 POINT_FORMATS = [("1.2", pf) for pf in range(4)] + [("1.3", pf) for pf in range(6)] + \
     [("1.4", pf) for pf in range(11)]
 
