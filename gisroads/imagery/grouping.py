@@ -8,7 +8,10 @@ segments are merged iteratively with the paper's criteria:
 - edge strength along the shared border,
 - convexity of the merged region (area / convex-hull area),
 - shared border length, absolute (metres) and relative to the shorter segment perimeter,
-- mean height difference from a DSM, when given (and mean NDVI difference, when given).
+- mean height difference from a DSM, when given (and mean NDVI difference, when given),
+- beyond the paper, the mean learned road probability difference, when a probability is
+  given (:mod:`gisroads.learn`): a road does not merge into a dark neighbour of its colour
+  that the model does not take for road.
 
 Each criterion value is mapped linearly to a goodness in [0, 1] between a "poor" and a
 "very good" limit (:data:`CRITERIA`); fuzzy sets on it are *good* (goodness >= 0.5 fully)
@@ -22,10 +25,11 @@ also when one is poor and others are very good:
 3. edge, colour and convexity are all very good: either border-length criterion may be
    poor.
 
-Height and NDVI differences are never disregarded: a roof is not a road however similar
-its colour. Pairs whose rule strength is at least 0.5 are candidates; they are sorted by
-the sum of their goodness values and, in each iteration, the best ``merge_fraction``
-(the paper's 10 %) are merged; pairs that share a segment merge into one segment.
+Height, NDVI and road-probability differences are never disregarded: a roof is not a road
+however similar its colour. Pairs whose rule strength is at least 0.5 are candidates; they
+are sorted by the sum of their goodness values and, in each iteration, the best
+``merge_fraction`` (the paper's 10 %) are merged; pairs that share a segment merge into one
+segment.
 
 Everything per pixel is computed once (histograms, border pixel pairs, row runs for the
 convex hulls) with ``bincount`` and array shifts; the iterations then work on per-segment
@@ -63,6 +67,7 @@ CRITERIA = {
     "border_rel": (0.05, 0.3),    # shared border / shorter perimeter
     "height_m": (1.5, 0.5),       # |mean DSM difference|, metres
     "ndvi": (0.25, 0.1),          # |mean NDVI difference|
+    "probability": (0.5, 0.2),    # |mean learned road probability difference|
 }
 """``(poor, very_good)`` limits of each criterion; goodness is linear in between."""
 
@@ -160,7 +165,7 @@ def _soft_histograms(bands: np.ndarray, labels: np.ndarray, n: int) -> np.ndarra
 class _State:
     """Per-segment sums and per-pair border sums of the current grouping."""
 
-    def __init__(self, labels, bands, edges, height, vegetation, n):
+    def __init__(self, labels, bands, edges, height, vegetation, probability, n):
         inside = labels >= 0
         ids = labels[inside]
         self.n = n
@@ -171,7 +176,8 @@ class _State:
         self.perimeter = _perimeters(labels, n).astype(float)
         self.hull = _hulls(labels, n)
         self.means = {}
-        for name, values in (("height_m", height), ("ndvi", vegetation)):
+        for name, values in (("height_m", height), ("ndvi", vegetation),
+                             ("probability", probability)):
             if values is not None:
                 finite = np.isfinite(values[inside])
                 self.means[name] = [np.bincount(ids[finite], values[inside][finite],
@@ -267,7 +273,7 @@ def merge_strength(goodness: dict[str, np.ndarray]) -> np.ndarray:
     ----------
     goodness : dict of ndarray
         Goodness in [0, 1] of every criterion in :data:`CRITERIA` that is in use
-        (``height_m`` and ``ndvi`` may be absent).
+        (``height_m``, ``ndvi`` and ``probability`` may be absent).
 
     Returns
     -------
@@ -278,7 +284,7 @@ def merge_strength(goodness: dict[str, np.ndarray]) -> np.ndarray:
     very_good = {k: np.clip(2 * g - 1, 0, 1) for k, g in goodness.items()}
     ones = np.ones_like(goodness["colour"])
     physical = ones.copy()
-    for name in ("height_m", "ndvi"):
+    for name in ("height_m", "ndvi", "probability"):
         if name in good:
             physical = np.minimum(physical, good[name])
     appearance = ("edge", "colour", "convexity")
@@ -315,7 +321,7 @@ def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, nd
                    nir_band: int | None = None, merge_fraction: float = 0.1,
                    max_iterations: int = 200, criteria: dict | None = None,
                    split_branches: bool = True, min_branch_m: float = MIN_BRANCH_M,
-                   edge_magnitude=None, progress=None) -> np.ndarray:
+                   edge_magnitude=None, probability=None, progress=None) -> np.ndarray:
     """Merge adjacent segments iteratively with the paper's criteria and fuzzy rules.
 
     Parameters
@@ -348,6 +354,9 @@ def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, nd
     edge_magnitude : array_like, shape (rows, cols), optional
         Edge strength on the image grid; default:
         :func:`gisroads.imagery.segments.edge_strength`, as the segmentation uses.
+    probability : array_like, shape (rows, cols), optional
+        A learned road probability in [0, 1] on the image grid (beyond the paper; NaN: no
+        value); enables the mean-probability-difference criterion.
     progress : callable, optional
         ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
 
@@ -384,6 +393,11 @@ def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, nd
         ndvi = np.asarray(ndvi, dtype=float)
         if ndvi.shape != labels.shape:
             raise ValueError(f"ndvi {ndvi.shape} and image {labels.shape} differ in shape")
+    if probability is not None:
+        probability = np.asarray(probability, dtype=float)
+        if probability.shape != labels.shape:
+            raise ValueError(f"probability {probability.shape} and image {labels.shape} "
+                             "differ in shape")
     grouped = compact
     if n >= 2:
         bands = scale_bands(image)
@@ -393,7 +407,7 @@ def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, nd
             raise ValueError(f"edge_magnitude {edges.shape} and image {labels.shape} differ "
                              "in shape")
         state = _State(compact, bands, edges,
-                       None if dsm is None else resample_to(dsm, image), ndvi, n)
+                       None if dsm is None else resample_to(dsm, image), ndvi, probability, n)
         _merge_iteratively(state, limits, pixel_m, merge_fraction, max_iterations, progress)
         grouped = np.where(compact >= 0, state.roots()[np.maximum(compact, 0)], -1)
     grouped = (connected_regions(grouped, background=-1, connectivity=1) - 1).astype(np.int32)

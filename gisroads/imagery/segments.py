@@ -9,20 +9,24 @@ grouping stage (:mod:`gisroads.imagery.grouping`) merges the pieces again.
 
 What makes it tractable
     A full-pixel NCut of a 1000 x 1000 image is a million-node eigenproblem. The paper keeps
-    the weight matrix sparse (local neighbourhoods); we go one step further and cut the graph
-    of SLIC superpixels of :func:`gisroads.segmentation.ncut.superpixel_graph` (a few pixels
-    to a few metres across, following intensity edges), with the weights of
+    the weight matrix sparse (local neighbourhoods); we go one step further and cut the
+    graph of SLIC superpixels of :func:`gisroads.segmentation.ncut.superpixel_graph` (a few
+    pixels to a few metres across, following intensity edges), with the weights of
     :func:`gisroads.segmentation.ncut.ncut_segmentation`: border length x colour similarity
     x intervening-edge term, times ``w_NDVI`` (its ``extra_affinity``) across the NDVI
-    threshold. An over-segmentation needs thousands of segments, and the cost of the
-    eigenvectors grows with the cube of the nodes and the number of segments, so the
-    superpixel graph is cut patch-wise: superpixels are grouped into square patches of
-    about :data:`SUPERPIXELS_PER_PATCH` nodes by their centroids and each patch gets its own
-    NCut (a dense eigenproblem of a few hundred nodes, milliseconds) into its share of the
-    segments, with the colour and edge scales ``sigma_I``, ``sigma_E`` of the whole image.
-    Each NCut is a genuine normalized cut of its patch; patch borders add a few segment
-    borders along superpixel borders, which the grouping removes where nothing separates the
-    two sides.
+    threshold. Beyond the paper, a learned road probability (:mod:`gisroads.learn`) adds the
+    factor ``exp(-(p_i - p_j)^2 / sigma_P^2)`` of the superpixels' mean probabilities
+    (:func:`gisroads.segmentation.ncut.value_affinity`), so segment borders follow the
+    borders between road and non-road as the model sees them, where the colours of a road
+    and its neighbour (a dark roof, a shadow) are alike. An over-segmentation needs
+    thousands of segments, and the cost of the eigenvectors grows with the cube of the nodes
+    and the number of segments, so the superpixel graph is cut patch-wise: superpixels are
+    grouped into square patches of about :data:`SUPERPIXELS_PER_PATCH` nodes by their
+    centroids and each patch gets its own NCut (a dense eigenproblem of a few hundred nodes,
+    milliseconds) into its share of the segments, with the colour and edge scales
+    ``sigma_I``, ``sigma_E`` of the whole image. Each NCut is a genuine normalized cut of
+    its patch; patch borders add a few segment borders along superpixel borders, which the
+    grouping removes where nothing separates the two sides.
 
 Defaults scale with the pixel size: the paper's images have 8-10 cm pixels
 (:data:`PAPER_PIXEL_M`); segments of :data:`SEGMENT_AREA_M2` (about a road width squared)
@@ -48,7 +52,7 @@ from ..features.edges import local_energy
 from ..geo import GeoRaster
 from ..progress import report
 from ..segmentation.ncut import (intervening_edge_strength, ncut_segmentation,
-                                 superpixel_graph, typical_scale)
+                                 superpixel_graph, typical_scale, value_affinity)
 from ..vectorize.regions import segment_polygons
 from .cues import ndvi, scale_bands, valid_mask, visible_mean
 from .roadparts import rasterize_segments
@@ -73,6 +77,10 @@ NDVI_THRESHOLD = 0.2
 (section 4). Grass and foliage lie above 0.3, asphalt, roofs and shadow below 0.1."""
 W_NDVI = 0.01
 """Default factor on the weights across the NDVI threshold, ``0 < w_NDVI << 1``."""
+SIGMA_P = 0.2
+"""Default ``sigma_P`` of the road-probability term (beyond the paper): adjacent superpixels
+whose mean learned road probabilities differ by 0.2 keep 1/e of their weight, by 0.4 2 %;
+probability noise within a surface (differences under 0.1) costs less than a quarter."""
 
 
 def pixel_size_m(raster: GeoRaster) -> float:
@@ -151,6 +159,16 @@ def _checked_edges(edge_magnitude, shape) -> np.ndarray:
     return edges
 
 
+def _node_means(superpixels: np.ndarray, values: np.ndarray, n_nodes: int) -> np.ndarray:
+    """Mean of the finite ``values`` over each superpixel (NaN where it has none)."""
+    inside = superpixels >= 0
+    ids, values = superpixels[inside], values[inside]
+    finite = np.isfinite(values)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (np.bincount(ids[finite], values[finite], minlength=n_nodes)
+                / np.bincount(ids[finite], minlength=n_nodes))
+
+
 def _patches(centroid: np.ndarray, shape: tuple[int, int], n_patches: int) -> np.ndarray:
     """Patch index of every superpixel: a grid of about ``n_patches`` square cells."""
     rows, cols = shape
@@ -164,8 +182,8 @@ def _patches(centroid: np.ndarray, shape: tuple[int, int], n_patches: int) -> np
 def segment_image(image: GeoRaster, *, nir_band: int | None = None,
                   red_band: int | None = None, n_segments: int | None = None,
                   n_superpixels: int | None = None, ndvi_threshold: float = NDVI_THRESHOLD,
-                  w_ndvi: float = W_NDVI, edge_magnitude=None, seed: int = 0,
-                  progress=None) -> np.ndarray:
+                  w_ndvi: float = W_NDVI, edge_magnitude=None, probability=None,
+                  sigma_p: float = SIGMA_P, seed: int = 0, progress=None) -> np.ndarray:
     """Over-segment an aerial image by normalized cuts (paper section 2.1.1).
 
     Colour similarity uses every band of the image stretched to [0, 1]
@@ -200,6 +218,12 @@ def segment_image(image: GeoRaster, *, nir_band: int | None = None,
     edge_magnitude : array_like, shape (rows, cols), optional
         Edge strength for the intervening-edge term; default: :func:`edge_strength` (pass
         it to share one computation with :func:`gisroads.imagery.grouping.group_segments`).
+    probability : array_like, shape (rows, cols), optional
+        A learned road probability in [0, 1] on the image grid (beyond the paper; NaN: no
+        value); adds the factor ``exp(-(p_i - p_j)^2 / sigma_P^2)`` of the superpixels'
+        mean probabilities to the weights.
+    sigma_p : float
+        ``sigma_P`` of that factor, probability units (:data:`SIGMA_P`).
     seed : int
         Seed of the eigensolver and discretisation: same seed, same segments.
     progress : callable, optional
@@ -246,16 +270,17 @@ def segment_image(image: GeoRaster, *, nir_band: int | None = None,
     sigma_intensity = typical_scale(np.linalg.norm(mean[pairs.row] - mean[pairs.col], axis=1))
     sigma_edge = typical_scale(sparse.triu(intervening_edge_strength(superpixels, adjacency,
                                                                 edges), k=1).tocoo().data)
-    extra = None
+    extra = []
     if vegetation_index is not None and w_ndvi < 1:
-        ids = superpixels[superpixels >= 0]
-        finite = np.isfinite(vegetation_index[superpixels >= 0])
-        counts = np.bincount(ids[finite], minlength=n_nodes)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            node_ndvi = np.bincount(ids[finite], vegetation_index[superpixels >= 0][finite],
-                                    minlength=n_nodes) / counts
-        extra = ndvi_affinity(adjacency, node_ndvi,
-                              ndvi_threshold=ndvi_threshold, w_ndvi=w_ndvi)
+        extra.append(ndvi_affinity(adjacency, _node_means(superpixels, vegetation_index, n_nodes),
+                                   ndvi_threshold=ndvi_threshold, w_ndvi=w_ndvi))
+    if probability is not None:
+        probability = np.asarray(probability, dtype=float)
+        if probability.shape != image.shape:
+            raise ValueError(f"probability {probability.shape} and image {image.shape} "
+                             "differ in shape")
+        extra.append(value_affinity(adjacency, _node_means(superpixels, probability, n_nodes),
+                                    sigma_p))
 
     n_patches = max(1, round(n_nodes / SUPERPIXELS_PER_PATCH))
     patch_of = _patches(features["centroid"], superpixels.shape, n_patches)
@@ -271,7 +296,7 @@ def segment_image(image: GeoRaster, *, nir_band: int | None = None,
                              max(boxes[i][axis].stop for i in nodes)) for axis in (0, 1))
         local = local_id[superpixels[window]]
         k = max(1, round(n_segments * len(nodes) / n_nodes))
-        patch_extra = None if extra is None else extra[nodes][:, nodes]
+        patch_extra = [factor[nodes][:, nodes] for factor in extra]
         patch_labels = ncut_segmentation(bands[(slice(None),) + window], n_segments=k,
                                          superpixels=local, edge_magnitude=edges[window],
                                          sigma_intensity=sigma_intensity,

@@ -8,7 +8,8 @@ One implementation serves the three users in this project:
 - Grote & Rottensteiner's imagery pipeline segments colour with the strength of intervening
   edges and a factor ``0 < w_NDVI << 1`` between pixels on opposite sides of an NDVI
   threshold (section 2.1.1): :func:`ncut_segmentation` with a multi-band image,
-  ``edge_magnitude`` and ``extra_affinity`` (built on :func:`superpixel_graph`'s adjacency);
+  ``edge_magnitude`` and ``extra_affinity`` (built on :func:`superpixel_graph`'s adjacency;
+  beyond the paper, :func:`value_affinity` of a learned road probability);
 - Zhu & Mordohai's city blocks: a graph of points with ``W = exp(-max L)`` along the segment
   between them (section 5): :func:`ncut` on the caller's sparse affinity matrix.
 
@@ -516,6 +517,41 @@ def intervening_edge_strength(superpixels, adjacency, edge_magnitude) -> sparse.
     return borders.matrix(borders.max_along(edge_magnitude))
 
 
+def value_affinity(adjacency, node_values, sigma: float) -> sparse.csr_matrix:
+    """A per-pair factor ``exp(-(v_i - v_j)^2 / sigma^2)`` from one value per superpixel, as
+    an ``extra_affinity`` of :func:`ncut_segmentation`: the colour term's form for a further
+    feature, e.g. a learned road probability.
+
+    Parameters
+    ----------
+    adjacency : scipy.sparse matrix, shape (n, n)
+        The superpixel adjacency of :func:`superpixel_graph` (its pattern gives the pairs).
+    node_values : array_like, shape (n,)
+        One value per superpixel (e.g. its mean road probability); NaN (no value) leaves
+        the pairs it is in at factor 1.
+    sigma : float
+        Scale of the value differences, in the values' units; positive.
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (n, n)
+        Symmetric, the factor at every adjacent pair, in (0, 1].
+    """
+    if not sigma > 0:
+        raise ValueError(f"sigma must be positive, got {sigma}")
+    node_values = np.asarray(node_values, dtype=float)
+    pairs = sparse.triu(sparse.csr_matrix(adjacency), k=1).tocoo()
+    if node_values.shape != (adjacency.shape[0],):
+        raise ValueError(f"node_values has shape {node_values.shape}, expected "
+                         f"({adjacency.shape[0]},): one value per superpixel")
+    difference = np.nan_to_num(node_values[pairs.row] - node_values[pairs.col], nan=0.0)
+    factor = np.exp(-(difference / sigma) ** 2)
+    return sparse.csr_matrix((np.concatenate([factor, factor]),
+                              (np.concatenate([pairs.row, pairs.col]),
+                               np.concatenate([pairs.col, pairs.row]))),
+                             shape=adjacency.shape)
+
+
 def ncut_segmentation(image, *, n_segments: int = 150, n_superpixels: int = 3000,
                       sigma_intensity: float | None = None, edge_magnitude=None,
                       sigma_edge: float | None = None, mask=None, extra_affinity=None,
@@ -548,11 +584,12 @@ def ncut_segmentation(image, *, n_segments: int = 150, n_superpixels: int = 3000
         intervening-edge strength over adjacent pairs, the same rule as ``sigma_intensity``.
     mask : array_like of bool, shape (rows, cols), optional
         True where a cell is masked out (no data).
-    extra_affinity : scipy.sparse matrix, shape (n, n), optional
-        A further factor per pair of adjacent superpixels of ``superpixels`` (so pass
+    extra_affinity : scipy.sparse matrix, shape (n, n), or a sequence of them, optional
+        Further factors per pair of adjacent superpixels of ``superpixels`` (so pass
         those too), e.g. Grote & Rottensteiner's ``w_NDVI`` between superpixels on opposite
-        sides of the NDVI threshold; pairs it stores no entry for keep their weight. Build
-        it on the ``adjacency`` of :func:`superpixel_graph`; give it symmetric.
+        sides of the NDVI threshold or :func:`value_affinity`; pairs a matrix stores no
+        entry for keep their weight; several matrices multiply. Build them on the
+        ``adjacency`` of :func:`superpixel_graph`; give them symmetric.
     superpixels : array_like of int, shape (rows, cols), optional
         Precomputed superpixels (:func:`superpixel_graph`), -1 outside; ``n_superpixels``
         and ``compactness`` are then unused.
@@ -599,7 +636,9 @@ def ncut_segmentation(image, *, n_segments: int = 150, n_superpixels: int = 3000
             sigma_edge = typical_scale(edge)
         weight *= np.exp(-(edge / sigma_edge) ** 2)
     if extra_affinity is not None:
-        weight *= borders.lookup(extra_affinity)
+        for factor in ([extra_affinity] if sparse.issparse(extra_affinity)
+                       else extra_affinity):
+            weight *= borders.lookup(factor)
 
     # superpixels that touch no other (valid islands in no-data) are segments of their own,
     # on top of the n_segments that NCut makes of the rest

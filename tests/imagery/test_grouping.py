@@ -82,6 +82,22 @@ def test_ndvi_difference_blocks_a_merge():
     assert len(np.unique(group_segments(labels, image, ndvi=ndvi))) == 2
 
 
+def test_a_road_probability_difference_blocks_a_merge():
+    halves = np.zeros((120, 160), int)
+    halves[:, 80:] = 1
+    image = raster(paint(halves, [ROAD, ROAD]))  # a dark roof as grey as the road
+    labels = grid_labels(halves.shape, 40, 40)
+    rng = np.random.default_rng(0)
+    probability = np.clip(np.where(halves == 0, 0.8, 0.1) + rng.normal(0, 0.05, halves.shape),
+                          0, 1)
+    assert len(np.unique(group_segments(labels, image))) == 1
+    grouped = group_segments(labels, image, probability=probability)
+    assert len(np.unique(grouped)) == 2
+    assert np.array_equal(grouped[:, :80] == grouped[0, 0], np.ones((120, 80), bool))
+    with pytest.raises(ValueError, match="probability"):
+        group_segments(labels, image, probability=probability[:10])
+
+
 def test_fuzzy_rules_let_very_good_criteria_outweigh_a_poor_one():
     names = ["colour", "edge", "convexity", "border_m", "border_rel"]
 
@@ -98,6 +114,7 @@ def test_fuzzy_rules_let_very_good_criteria_outweigh_a_poor_one():
     assert strength(colour=1, edge=1, convexity=1, border_m=0.0, border_rel=0.0) < 0.5
     assert strength(colour=1, edge=1, convexity=1, height_m=0.0) < 0.5  # never outweighed
     assert strength(colour=1, edge=1, convexity=1, ndvi=0.0) < 0.5
+    assert strength(colour=1, edge=1, convexity=1, probability=0.0) < 0.5
 
 
 def test_one_iteration_merges_at_most_the_best_tenth_of_the_pairs():
@@ -176,7 +193,7 @@ def test_bad_input_is_refused():
     with pytest.raises(Cancelled):
         group_segments(labels, image, progress=cancel)
     assert set(CRITERIA) == {"colour", "edge", "convexity", "border_m", "border_rel",
-                             "height_m", "ndvi"}
+                             "height_m", "ndvi", "probability"}
 
 
 def mixed_share(labels, region):

@@ -98,6 +98,30 @@ def test_the_ndvi_factor_separates_verge_from_road_of_equal_brightness():
     assert with_ndvi < 0.01 and without > 4 * with_ndvi
 
 
+def test_the_road_probability_separates_road_from_a_neighbour_of_its_colour():
+    """The same textured colours on both sides (a road beside a dark roof): only a learned
+    road probability (0.8 against 0.1, with noise) tells them apart; combined with the NDVI
+    factor (a NIR band that does not differ) it still does."""
+    rng = np.random.default_rng(0)
+    n = 192
+    road = np.zeros((n, n), bool)
+    road[:, 96:] = True
+    texture = np.kron(rng.uniform(-40, 40, (n // 8, n // 8)), np.ones((8, 8)))
+    data = 100.0 + texture[None] + rng.normal(0, 3, (4, n, n))
+    image = raster(np.clip(data, 1, 255).astype(np.float32))
+    probability = np.clip(np.where(road, 0.8, 0.1) + rng.normal(0, 0.05, (n, n)), 0, 1)
+    options = dict(n_segments=12, n_superpixels=300)
+    without = straddling_share(segment_image(image, **options), road)
+    with_probability = straddling_share(segment_image(image, probability=probability,
+                                                      **options), road)
+    # what is left straddles inside superpixels, which follow the colours only
+    assert with_probability < 0.02 and without > 5 * with_probability
+    both = segment_image(image, probability=probability, nir_band=4, **options)
+    assert straddling_share(both, road) < 0.02
+    with pytest.raises(ValueError, match="probability"):
+        segment_image(image, probability=probability[:10])
+
+
 def test_a_shared_edge_image_gives_the_same_segments():
     data, _ = road_strip_image(bands=4)
     image = raster(data.astype(np.float32))

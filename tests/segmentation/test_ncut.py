@@ -6,7 +6,7 @@ from skimage.measure import label as connected_label
 
 from gisroads.features.edges import local_energy
 from gisroads.segmentation.ncut import (intervening_edge_strength, ncut, ncut_segmentation,
-                                        segment_boundaries, superpixel_graph)
+                                        segment_boundaries, superpixel_graph, value_affinity)
 
 
 def cliques(*sizes, links=()):
@@ -207,6 +207,40 @@ def test_extra_affinity_cuts_where_it_says():
     assert labels.max() == 1
     assert (labels[east_cells] == labels[east_cells][0]).all()
     assert (labels[~east_cells] != labels[east_cells][0]).all()
+
+
+def test_value_affinity_weakens_pairs_by_their_value_difference():
+    adjacency = sparse.csr_matrix(np.array([[0, 2, 0, 0], [2, 0, 3, 0], [0, 3, 0, 1],
+                                            [0, 0, 1, 0]]))
+    factor = value_affinity(adjacency, np.array([0.9, 0.7, 0.1, np.nan]), 0.2).toarray()
+    np.testing.assert_allclose(factor, factor.T)
+    np.testing.assert_allclose([factor[0, 1], factor[1, 2], factor[2, 3]],
+                               [np.exp(-1), np.exp(-9), 1.0])  # NaN: no value, factor 1
+    assert factor[0, 2] == 0 and factor[0, 3] == 0  # not adjacent: no entry
+    with pytest.raises(ValueError, match="sigma"):
+        value_affinity(adjacency, np.zeros(4), 0.0)
+    with pytest.raises(ValueError, match="one value per superpixel"):
+        value_affinity(adjacency, np.zeros(3), 0.2)
+
+
+def test_several_extra_affinities_multiply():
+    """A cut line east-west from one factor, north-south from another: four segments
+    follow both lines; each factor alone gives its own halves."""
+    rng = np.random.default_rng(3)
+    image = rng.normal(0, 0.1, (120, 120))
+    superpixels, adjacency, features = superpixel_graph(image, n_superpixels=200)
+    east = (features["centroid"][:, 1] > 60).astype(float)
+    south = (features["centroid"][:, 0] > 60).astype(float)
+    factors = [value_affinity(adjacency, east, 0.05), value_affinity(adjacency, south, 0.05)]
+    labels = ncut_segmentation(image, n_segments=4, superpixels=superpixels,
+                               extra_affinity=factors)
+    quadrant = (east * 2 + south)[superpixels]
+    assert labels.max() == 3
+    for q in range(4):
+        assert len(np.unique(labels[quadrant == q])) == 1
+    halves = ncut_segmentation(image, n_segments=2, superpixels=superpixels,
+                               extra_affinity=factors[0])
+    assert all(len(np.unique(halves[east[superpixels] == side])) == 1 for side in (0, 1))
 
 
 def test_bands_are_compared_as_vectors():
