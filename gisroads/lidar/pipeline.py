@@ -578,10 +578,12 @@ def _intensity_roads(store: TileStore, *, cell_m, min_points: int, options: dict
 
 
 def _in_core(frame: gpd.GeoDataFrame, tile: Tile) -> gpd.GeoDataFrame:
+    """The rectangles of ``frame`` whose centre is in the tile's core."""
     if len(frame) == 0:
         return frame
-    centres = shapely.centroid(frame.geometry.values)
-    x, y = shapely.get_x(centres), shapely.get_y(centres)
+    # a rectangle's centroid is the centre of its bounding box (30x faster to get)
+    bounds = shapely.bounds(np.asarray(frame.geometry.values))
+    x, y = (bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2
     core = tile.core
     return frame[(x >= core[0]) & (x < core[2]) & (y >= core[1]) & (y < core[3])]
 
