@@ -154,14 +154,16 @@ class BenchmarkImage:
             raise ValueError(f"window ({row}, {col}, {rows}, {cols}) lies outside the "
                              f"{height} x {width} image")
         window = (slice(row, row + rows), slice(col, col + cols))
-        image = _crop_raster(self.image, *window)
-        mask = None if self.truth_mask is None else _crop_raster(self.truth_mask, *window)
+        image = crop_raster(self.image, *window)
+        mask = None if self.truth_mask is None else crop_raster(self.truth_mask, *window)
         area = shapely.intersection(self.valid_area, shapely.box(*image.bounds))
         return replace(self, image=image, truth_mask=mask, valid_area=area,
                        truth=_clip_frame(self.truth, area))
 
 
-def _crop_raster(raster: GeoRaster, rows: slice, cols: slice) -> GeoRaster:
+def crop_raster(raster: GeoRaster, rows: slice, cols: slice) -> GeoRaster:
+    """The window ``rows``, ``cols`` (slices, pixels) of a raster, georeferenced (a view of
+    its data, no copy)."""
     t = raster.transform
     x0 = t.c + cols.start * t.a + rows.start * t.b
     y0 = t.f + cols.start * t.d + rows.start * t.e

@@ -21,9 +21,14 @@ grouping criterion (:func:`gisroads.imagery.grouping.group_segments`), replaces 
 tests of the road parts (:func:`gisroads.imagery.roadparts.filter_road_parts`,
 ``probability_min``) and the radiometric context of the gaps (the mean probability along a
 gap, :func:`gisroads.network.subgraph.link_road_parts`). ``model=None`` is the papers'
-pipeline alone. BLAS and OpenMP thread pools are pinned (``threads``, default one) for the whole run,
-whatever the environment says: oversubscribed pools made the segmentation collapse on a
-loaded machine.
+pipeline alone. BLAS and OpenMP thread pools are pinned (``threads``, default one) for the
+whole run, whatever the environment says: oversubscribed pools made the segmentation
+collapse on a loaded machine.
+
+An image of more than ``2 * TILE_PX`` pixels a side runs the papers' stages tile by tile
+(:func:`image_tiles`: the LiDAR tiles of :mod:`gisroads.lidar.tiles`, overlapping by
+:data:`TILE_OVERLAP_M`), the tiles' road strings stitched at the seams as the LiDAR tiles'
+centre lines are, then one network stage (junctions, significance) over the whole image.
 """
 from __future__ import annotations
 
@@ -33,15 +38,20 @@ import time
 from pathlib import Path
 from typing import NamedTuple
 
+import geopandas as gpd
 import numpy as np
+import pandas as pd
+import shapely
 
 from ..geo import GeoRaster, RoadNetwork
+from ..lidar.tiles import Tile, stitch_tiles, tile_grid
 from ..progress import Progress, report, scaled
-from .cues import context_rasters, image_cues
+from .cues import context_rasters, image_cues, valid_mask
+from .datasets import crop_raster
 from .grouping import group_segments
 from ..network.junctions import strings_to_network
 from .roadparts import extract_road_parts
-from .segments import edge_strength, segment_image
+from .segments import edge_strength, pixel_size_m, segment_image
 from ..network.subgraph import link_road_parts
 
 METHOD = "grote-rottensteiner"
@@ -51,13 +61,25 @@ PROBABILITY_THRESHOLD = 0.4
 """Road threshold of the probability path: on the 13 benchmark images (``make bench``,
 ``imagery_real``) the adapted default model gave mean quality 0.270 / 0.270 / 0.257 at
 0.3 / 0.4 / 0.5; 0.4 is at least the naive baseline on four of the five datasets (0.3:
-three; Massachusetts 0.272 against 0.273). Not adapted: 0.174 / 0.157 / 0.109."""
+three; Massachusetts 0.272 against 0.273). Not adapted: 0.174 / 0.157 / 0.109. The same
+features trained with another seed give 0.267 / 0.256 / 0.264 (Massachusetts 0.263 at 0.4):
+the three thresholds, and Massachusetts' margin, are within the training's seed noise."""
 DEFAULT_METHOD = PROBABILITY_METHOD
 """The path :func:`extract_image_roads` takes when given a model and no ``method``: the
 probability alone through the network stage, mean quality 0.270 on the 13 benchmark images
 against 0.181 for the papers' pipeline without a model, 0.170 with the probability in its
 stages (0.161 as road-part criterion and gap context only, before the NCut term and the
 grouping criterion) and 0.224 for the naive baseline."""
+
+
+TILE_PX = 1000
+"""Tile side of the papers' stages on a large image, pixels: an image with more than
+``2 * TILE_PX`` rows or columns runs tile by tile (:func:`image_tiles`), so the stages'
+memory (a few float rasters per tile and the segmentation's arrays) stays that of a tile."""
+TILE_OVERLAP_M = 100.0
+"""Overlap of neighbouring tiles, metres (the LiDAR paper's, :mod:`gisroads.lidar.tiles`):
+each core sees 50 m of context on every side, more than the longest gap edge
+(:data:`gisroads.network.subgraph.MAX_GAP_M`, 40 m); at most a third of a tile."""
 
 
 @contextlib.contextmanager
@@ -143,7 +165,7 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
                         probability: GeoRaster | None = None,
                         method: str | None = None,
                         probability_threshold: float = PROBABILITY_THRESHOLD,
-                        threads: int | None = 1,
+                        tile_px: int = TILE_PX, threads: int | None = 1,
                         progress: Progress = None) -> ImageRoads:
     """The road network of an aerial image (RGB, CIR or panchromatic; NIR and DSM optional).
 
@@ -182,6 +204,12 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
         model, the papers' stages without one.
     probability_threshold : float
         See ``method``.
+    tile_px : int
+        The papers' stages run tile by tile on an image with more than ``2 * tile_px`` rows
+        or columns (tiles of ``tile_px`` overlapping by :data:`TILE_OVERLAP_M`, road strings
+        stitched at the seams, then one network stage over the whole image; QA layers get
+        a ``tile`` column; ``n_segments`` then counts per tile). The probability path tiles
+        in its own network stage.
     threads : int or None
         BLAS/OpenMP threads during the run (:func:`pinned_threads`).
     progress : callable, optional
@@ -198,12 +226,13 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
                         gap_options=gap_options, weight_options=weight_options,
                         network_options=network_options, model=model, adapt=adapt,
                         probability=probability, method=method,
-                        probability_threshold=probability_threshold, progress=progress)
+                        probability_threshold=probability_threshold, tile_px=tile_px,
+                        progress=progress)
 
 
 def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, gap_options,
              weight_options, network_options, model, adapt, probability, method,
-             probability_threshold, progress) -> ImageRoads:
+             probability_threshold, tile_px, progress) -> ImageRoads:
     if image.crs is not None and not image.crs.is_projected:
         raise ValueError("the image must be in a projected CRS in metres (reproject it, "
                          "e.g. to its UTM zone)")
@@ -243,6 +272,47 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
             "roads": len(network.centrelines)})
     base = 0.15 if "probability" in timings else 0.0
     progress = scaled(progress, base, 1.0)
+    stages = dict(nir_band=nir_band, red_band=red_band, dsm=dsm, n_segments=n_segments,
+                  road_part_criteria=road_part_criteria, gap_options=gap_options,
+                  weight_options=weight_options)
+    if max(image.shape) > 2 * tile_px:
+        strings, qa, record, counts = _tiled_road_strings(
+            image, probability, tile_px=tile_px, timings=timings,
+            progress=scaled(progress, 0.0, 0.85), **stages)
+    else:
+        strings, qa, record, counts = _road_strings(
+            image, probability, timings=timings, progress=scaled(progress, 0.0, 0.85),
+            **stages)
+    clock = time.perf_counter()
+    network, connections = strings_to_network(strings, extent=image.bounds, crs=image.crs,
+                                              method=METHOD, progress=scaled(progress, 0.85, 1.0),
+                                              **(network_options or {}))
+    lap("network")
+    network.centrelines["cues"] = record["cues"]
+    network.qa = {**qa, "junction_connections": connections}
+    timings["total"] = sum(timings.values())
+    report(progress, 1.0, f"{len(network.centrelines)} roads")
+    gaps = qa["gap_edges"]
+    return ImageRoads(network, {
+        "timings_s": timings, "method": METHOD, "probability": probability,
+        "cues": record, **counts, "gap_edges": len(gaps),
+        "selected_gaps": int(gaps["selected"].sum()) if len(gaps) else 0,
+        "roads": len(network.centrelines)})
+
+
+def _road_strings(image: GeoRaster, probability: GeoRaster | None, *, nir_band, red_band,
+                  dsm, n_segments, road_part_criteria, gap_options, weight_options,
+                  timings: dict, progress: Progress):
+    """The papers' stages up to the road strings on one image (or tile): ``(strings, qa,
+    cues record, counts)``; each stage's seconds are added to ``timings``."""
+    clock = time.perf_counter()
+
+    def lap(stage: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[stage] = timings.get(stage, 0.0) + now - clock
+        clock = now
+
     report(progress, 0.0, "image cues")
     cues = image_cues(image, nir_band=nir_band, red_band=red_band, dsm=dsm)
     if probability is not None:
@@ -253,15 +323,15 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
     labels = segment_image(image, nir_band=nir_band, red_band=red_band,
                            n_segments=n_segments, edge_magnitude=edges,
                            probability=cues.probability,
-                           progress=scaled(progress, 0.02, 0.4))
+                           progress=scaled(progress, 0.02, 0.45))
     lap("segmentation")
-    report(progress, 0.4, "grouping segments")
+    report(progress, 0.45, "grouping segments")
     labels = group_segments(labels, image, dsm=dsm, ndvi=cues.ndvi, nir_band=nir_band,
                             edge_magnitude=edges, probability=cues.probability,
-                            progress=scaled(progress, 0.4, 0.55))
+                            progress=scaled(progress, 0.45, 0.65))
     lap("grouping")
     parts = extract_road_parts(labels, image, cues=cues, edge_magnitude=edges,
-                               progress=scaled(progress, 0.55, 0.75),
+                               progress=scaled(progress, 0.65, 0.88),
                                **(road_part_criteria or {}))
     lap("road_parts")
     context = context_rasters(cues)
@@ -270,21 +340,71 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
     gaps, strings = link_road_parts(parts.road_parts, transform=image.transform,
                                     **context, gap_options=gap_options,
                                     weight_options=weight_options,
-                                    progress=scaled(progress, 0.75, 0.85))
+                                    progress=scaled(progress, 0.88, 1.0))
     lap("subgraphs")
-    network, connections = strings_to_network(strings, extent=image.bounds, crs=image.crs,
-                                              method=METHOD, progress=scaled(progress, 0.85, 1.0),
-                                              **(network_options or {}))
-    lap("network")
-    record = cues.record()
-    network.centrelines["cues"] = record["cues"]
-    network.qa = {"segments": parts.segments, "road_parts": parts.road_parts,
-                  "gap_edges": gaps, "junction_connections": connections}
-    timings["total"] = sum(timings.values())
-    report(progress, 1.0, f"{len(network.centrelines)} roads")
-    return ImageRoads(network, {
-        "timings_s": timings, "method": METHOD, "probability": probability,
-        "cues": record, "segments": int(np.max(labels)) + 1,
-        "road_parts": len(parts.road_parts), "gap_edges": len(gaps),
-        "selected_gaps": int(gaps["selected"].sum()) if len(gaps) else 0,
-        "roads": len(network.centrelines)})
+    qa = {"segments": parts.segments, "road_parts": parts.road_parts, "gap_edges": gaps}
+    counts = {"segments": int(np.max(labels)) + 1, "road_parts": len(parts.road_parts)}
+    return strings, qa, cues.record(), counts
+
+
+def image_tiles(image: GeoRaster, tile_px: int = TILE_PX) -> list[tuple[Tile, tuple]]:
+    """The tiles the papers' stages run in on a large image: the LiDAR tiles
+    (:func:`gisroads.lidar.tiles.tile_grid`) of ``tile_px`` pixels overlapping by
+    :data:`TILE_OVERLAP_M` (in whole pixels, at most a third of a tile), each with its pixel
+    window
+    ``(rows, cols)`` (slices, cut to the image); tiles without a valid pixel are left out.
+
+    Parameters
+    ----------
+    image : GeoRaster
+        North-up, in a projected CRS in metres.
+    tile_px : int
+        Tile side, pixels.
+    """
+    transform = image.transform
+    if transform.b != 0 or transform.d != 0:
+        raise ValueError("tiling needs a north-up image (no rotation in its transform)")
+    # whole pixels, so that tile and core borders fall on pixel borders
+    overlap_px = min(round(TILE_OVERLAP_M / pixel_size_m(image)), tile_px // 3)
+    tile_m, overlap_m = tile_px * image.pixel_size, overlap_px * image.pixel_size
+    valid = valid_mask(image)
+    tiles = []
+    for tile in tile_grid(image.bounds, tile_m=tile_m, overlap_m=overlap_m):
+        xmin, ymin, xmax, ymax = tile.bounds
+        rows = np.round((np.array([ymax, ymin]) - transform.f) / transform.e).astype(int)
+        cols = np.round((np.array([xmin, xmax]) - transform.c) / transform.a).astype(int)
+        window = tuple(slice(max(0, int(ends.min())), min(n, int(ends.max())))
+                       for ends, n in ((rows, image.shape[0]), (cols, image.shape[1])))
+        if valid[window].any():
+            tiles.append((tile, window))
+    return tiles
+
+
+def _tiled_road_strings(image: GeoRaster, probability: GeoRaster | None, *, tile_px: int,
+                        timings: dict, progress: Progress, **stages):
+    """:func:`_road_strings` tile by tile (:func:`image_tiles`), the tiles' road strings
+    stitched as the LiDAR tiles' centre lines are (:func:`gisroads.lidar.tiles.stitch_tiles`:
+    clipped to the cores, seam ends joined, pieces of one road merged), the QA layers cut
+    to the cores with a ``tile`` column (ids are per tile)."""
+    tiles = image_tiles(image, tile_px)
+    if not tiles:
+        raise ValueError("the image has no valid pixel")
+    pieces, qa, counts, record = [], {}, {"segments": 0, "road_parts": 0}, None
+    for k, (tile, (rows, cols)) in enumerate(tiles):
+        report(progress, k / len(tiles), f"tile {k + 1} of {len(tiles)}")
+        strings, tile_qa, record, tile_counts = _road_strings(
+            crop_raster(image, rows, cols),
+            None if probability is None else crop_raster(probability, rows, cols),
+            timings=timings, progress=scaled(progress, k / len(tiles), (k + 1) / len(tiles)),
+            **stages)
+        pieces.append((tile, strings))
+        core = shapely.box(*tile.core)
+        for name, frame in tile_qa.items():
+            frame = frame.assign(tile=k)
+            frame = frame.set_geometry(shapely.intersection(frame.geometry.values, core))
+            qa.setdefault(name, []).append(frame[~frame.geometry.is_empty])
+        counts = {key: counts[key] + tile_counts[key] for key in counts}
+    report(progress, 1.0, "stitching tiles")
+    qa = {name: gpd.GeoDataFrame(pd.concat(frames, ignore_index=True), crs=image.crs)
+          for name, frames in qa.items()}
+    return stitch_tiles(pieces), qa, record, {**counts, "tiles": len(tiles)}
