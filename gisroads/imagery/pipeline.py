@@ -32,7 +32,6 @@ centre lines are, then one network stage (junctions, significance) over the whol
 """
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import time
 from pathlib import Path
@@ -52,6 +51,7 @@ from .grouping import group_segments
 from ..network.junctions import strings_to_network
 from .roadparts import extract_road_parts
 from .segments import edge_strength, pixel_size_m, segment_image
+from ..segmentation.ncut import pinned_threads
 from ..network.subgraph import link_road_parts
 
 METHOD = "grote-rottensteiner"
@@ -80,22 +80,6 @@ TILE_OVERLAP_M = 100.0
 """Overlap of neighbouring tiles, metres (the LiDAR paper's, :mod:`gisroads.lidar.tiles`):
 each core sees 50 m of context on every side, more than the longest gap edge
 (:data:`gisroads.network.subgraph.MAX_GAP_M`, 40 m); at most a third of a tile."""
-
-
-@contextlib.contextmanager
-def pinned_threads(limit: int | None = 1):
-    """BLAS/OpenMP thread pools limited to ``limit`` threads inside the block (threadpoolctl;
-    None leaves them as they are)."""
-    if limit is None:
-        yield
-        return
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - a dependency, and it comes with scikit-learn
-        yield
-        return
-    with threadpool_limits(limits=limit):
-        yield
 
 
 def resolve_model(model):

@@ -51,7 +51,7 @@ from skimage.measure import label as connected_regions
 from ..features.edges import local_energy
 from ..geo import GeoRaster
 from ..progress import report
-from ..segmentation.ncut import (intervening_edge_strength, ncut_segmentation,
+from ..segmentation.ncut import (intervening_edge_strength, ncut_segmentation, pinned_threads,
                                  superpixel_graph, typical_scale, value_affinity)
 from ..vectorize.regions import segment_polygons
 from .cues import ndvi, scale_bands, valid_mask, visible_mean
@@ -288,24 +288,26 @@ def segment_image(image: GeoRaster, *, nir_band: int | None = None,
     boxes = ndimage.find_objects(superpixels + 1)  # superpixel i is boxes[i]
     labels = np.full(superpixels.shape, -1, np.int32)
     next_label = 0
-    for done, patch in enumerate(used_patches):
-        nodes = np.flatnonzero(patch_of == patch)
-        local_id = np.full(n_nodes + 1, -1, np.int32)  # index -1 (no superpixel) stays -1
-        local_id[nodes] = np.arange(len(nodes))
-        window = tuple(slice(min(boxes[i][axis].start for i in nodes),
-                             max(boxes[i][axis].stop for i in nodes)) for axis in (0, 1))
-        local = local_id[superpixels[window]]
-        k = max(1, round(n_segments * len(nodes) / n_nodes))
-        patch_extra = [factor[nodes][:, nodes] for factor in extra]
-        patch_labels = ncut_segmentation(bands[(slice(None),) + window], n_segments=k,
-                                         superpixels=local, edge_magnitude=edges[window],
-                                         sigma_intensity=sigma_intensity,
-                                         sigma_edge=sigma_edge, extra_affinity=patch_extra,
-                                         seed=seed)
-        inside = local >= 0
-        labels[window][inside] = patch_labels[inside] + next_label
-        next_label += int(patch_labels.max()) + 1
-        report(progress, 0.4 + 0.6 * (done + 1) / len(used_patches), "normalized cuts")
+    # one thread: the patches' eigenproblems are small (see pinned_threads)
+    with pinned_threads(1):
+        for done, patch in enumerate(used_patches):
+            nodes = np.flatnonzero(patch_of == patch)
+            local_id = np.full(n_nodes + 1, -1, np.int32)  # index -1 (no superpixel) stays -1
+            local_id[nodes] = np.arange(len(nodes))
+            window = tuple(slice(min(boxes[i][axis].start for i in nodes),
+                                 max(boxes[i][axis].stop for i in nodes)) for axis in (0, 1))
+            local = local_id[superpixels[window]]
+            k = max(1, round(n_segments * len(nodes) / n_nodes))
+            patch_extra = [factor[nodes][:, nodes] for factor in extra]
+            patch_labels = ncut_segmentation(bands[(slice(None),) + window], n_segments=k,
+                                             superpixels=local, edge_magnitude=edges[window],
+                                             sigma_intensity=sigma_intensity,
+                                             sigma_edge=sigma_edge, extra_affinity=patch_extra,
+                                             seed=seed)
+            inside = local >= 0
+            labels[window][inside] = patch_labels[inside] + next_label
+            next_label += int(patch_labels.max()) + 1
+            report(progress, 0.4 + 0.6 * (done + 1) / len(used_patches), "normalized cuts")
     return (connected_regions(labels, background=-1, connectivity=1) - 1).astype(np.int32)
 
 

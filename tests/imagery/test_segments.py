@@ -98,6 +98,24 @@ def test_the_ndvi_factor_separates_verge_from_road_of_equal_brightness():
     assert with_ndvi < 0.01 and without > 4 * with_ndvi
 
 
+def test_the_normalized_cuts_run_with_one_blas_thread():
+    """Called alone (a QGIS algorithm does), the cut still pins BLAS: with OpenBLAS's own
+    threads an ETH image's segmentation took 21-34 s of CPU instead of 0.5 s on a loaded
+    machine."""
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    data, _ = road_strip_image()
+    seen = []
+
+    def progress(fraction, message):
+        if message == "normalized cuts" and fraction > 0.4:  # after a patch's cut
+            seen.append(max(pool["num_threads"] for pool in threadpoolctl.threadpool_info()))
+
+    with threadpoolctl.threadpool_limits(limits=2):  # what a 2-core machine starts with
+        segment_image(raster(data.astype(np.float32)), n_segments=24, progress=progress)
+        assert max(pool["num_threads"] for pool in threadpoolctl.threadpool_info()) == 2
+    assert seen and max(seen) == 1
+
+
 def test_the_road_probability_separates_road_from_a_neighbour_of_its_colour():
     """The same textured colours on both sides (a road beside a dark roof): only a learned
     road probability (0.8 against 0.1, with noise) tells them apart; combined with the NDVI
