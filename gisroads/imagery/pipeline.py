@@ -43,7 +43,7 @@ import pandas as pd
 import shapely
 
 from ..geo import GeoRaster, RoadNetwork
-from ..lidar.tiles import Tile, stitch_tiles, tile_grid
+from ..lidar.tiles import Tile, clip_to_core, stitch_tiles, tile_grid
 from ..progress import Progress, report, scaled
 from .cues import context_rasters, image_cues, valid_mask
 from .datasets import crop_raster
@@ -364,6 +364,24 @@ def image_tiles(image: GeoRaster, tile_px: int = TILE_PX) -> list[tuple[Tile, tu
     return tiles
 
 
+def _cut_to_core(frame: gpd.GeoDataFrame, tile: Tile) -> gpd.GeoDataFrame:
+    """A tile's QA layer cut to the tile's core: lines as the stitched strings are
+    (:func:`gisroads.lidar.tiles.clip_to_core`), polygons to their polygonal parts inside
+    (a segment along the core's border leaves no line or point behind)."""
+    if len(frame) == 0 or not frame.geom_type.isin(["Polygon", "MultiPolygon"]).all():
+        return clip_to_core(frame, tile)
+    clipped = shapely.intersection(frame.geometry.values, shapely.box(*tile.core))
+    parts, owner = shapely.get_parts(clipped, return_index=True)
+    area = (shapely.get_type_id(parts) == 3) & ~shapely.is_empty(parts)  # Polygon
+    kept = np.unique(owner[area])
+    polygons = shapely.multipolygons(parts[area], indices=np.searchsorted(kept, owner[area]))
+    single = shapely.get_num_geometries(polygons) == 1
+    polygons[single] = shapely.get_geometry(polygons[single], 0)
+    kept_rows = frame.iloc[kept]
+    return kept_rows.set_geometry(gpd.GeoSeries(polygons, index=kept_rows.index,
+                                                crs=frame.crs))
+
+
 def _tiled_road_strings(image: GeoRaster, probability: GeoRaster | None, *, tile_px: int,
                         timings: dict, progress: Progress, **stages):
     """:func:`_road_strings` tile by tile (:func:`image_tiles`), the tiles' road strings
@@ -382,11 +400,8 @@ def _tiled_road_strings(image: GeoRaster, probability: GeoRaster | None, *, tile
             timings=timings, progress=scaled(progress, k / len(tiles), (k + 1) / len(tiles)),
             **stages)
         pieces.append((tile, strings))
-        core = shapely.box(*tile.core)
         for name, frame in tile_qa.items():
-            frame = frame.assign(tile=k)
-            frame = frame.set_geometry(shapely.intersection(frame.geometry.values, core))
-            qa.setdefault(name, []).append(frame[~frame.geometry.is_empty])
+            qa.setdefault(name, []).append(_cut_to_core(frame.assign(tile=k), tile))
         counts = {key: counts[key] + tile_counts[key] for key in counts}
     report(progress, 1.0, "stitching tiles")
     qa = {name: gpd.GeoDataFrame(pd.concat(frames, ignore_index=True), crs=image.crs)

@@ -138,9 +138,14 @@ def test_a_large_image_runs_tile_by_tile_like_the_whole_image(large_scene_runs):
     # no road twice where the tiles overlap: the stitched lines barely overlap each other
     lines = tiled.network.centrelines.geometry.values
     assert shapely.union_all(lines).length >= 0.99 * shapely.length(lines).sum()
-    # the QA layers come from the tiles' cores, with the tile they come from
+    # the QA layers come from the tiles' cores, with the tile they come from, and keep
+    # their geometry types (clipping a polygon along the core's border gives lines too)
     segments = tiled.network.qa["segments"]
     assert set(segments["tile"]) == set(range(9))
+    assert set(segments.geom_type) <= {"Polygon", "MultiPolygon"}
+    assert not segments.geometry.is_empty.any()
+    for name in ("road_parts", "gap_edges"):
+        assert set(tiled.network.qa[name].geom_type) <= {"LineString"}
     assert shapely.union_all(segments.geometry.values).area == pytest.approx(frame.area,
                                                                    rel=1e-6)
     # memory: a tile's working set, not the image's (measured 25 MB against 121 MB)
