@@ -51,7 +51,7 @@ from .grouping import group_segments
 from ..network.junctions import strings_to_network
 from .roadparts import extract_road_parts
 from .segments import edge_strength, pixel_size_m, segment_image
-from ..segmentation.ncut import pinned_threads
+from ..parallel import pinned_threads
 from ..network.subgraph import link_road_parts
 
 METHOD = "grote-rottensteiner"

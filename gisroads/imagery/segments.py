@@ -51,7 +51,8 @@ from skimage.measure import label as connected_regions
 from ..features.edges import local_energy
 from ..geo import GeoRaster
 from ..progress import report
-from ..segmentation.ncut import (intervening_edge_strength, ncut_segmentation, pinned_threads,
+from ..parallel import pinned_threads
+from ..segmentation.ncut import (intervening_edge_strength, ncut_segmentation,
                                  superpixel_graph, typical_scale, value_affinity)
 from ..vectorize.regions import segment_polygons
 from .cues import ndvi, scale_bands, valid_mask, visible_mean

@@ -45,7 +45,6 @@ methods. IEEE TPAMI 34 (11).
 """
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,6 +55,7 @@ from skimage.measure import label as connected_label
 from skimage.segmentation import slic
 
 from ..features.edges import fill_nearest
+from ..parallel import pinned_threads
 
 DENSE_EIGEN_NODES = 1000
 """Graphs up to this many nodes are solved with a dense eigendecomposition (faster and
@@ -84,25 +84,6 @@ barely moves superpixel borders, while a step of a few noise deviations pulls th
 SLIC_CLIP = 5.0
 """Values are clipped to +-5 robust standard deviations of the image before SLIC, so a few
 extreme cells (retro-reflective paint, specular returns) do not shape the superpixels."""
-
-
-@contextlib.contextmanager
-def pinned_threads(limit: int | None = 1):
-    """BLAS/OpenMP thread pools limited to ``limit`` threads inside the block (threadpoolctl;
-    None leaves them as they are). The eigenproblems of a patch-wise NCut are a few hundred
-    nodes: more threads do not speed them up, and on a loaded machine spinning OpenBLAS
-    threads made them collapse (an ETH image's segmentation: 21-34 s of CPU unpinned, 0.5 s
-    pinned, at load average 5 on 2 cores)."""
-    if limit is None:
-        yield
-        return
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - a dependency, and it comes with scikit-learn
-        yield
-        return
-    with threadpool_limits(limits=limit):
-        yield
 
 
 def _canonical(labels: np.ndarray) -> np.ndarray:
@@ -284,7 +265,8 @@ def ncut(affinity, n_segments: int, *, seed: int = 0) -> np.ndarray:
         labels[connected] = np.arange(len(connected))
     else:
         subgraph = weights[connected][:, connected]
-        _, vectors = leading_eigenpairs(subgraph, k_connected, seed=seed)
+        with pinned_threads(1):  # a few hundred nodes: more threads only spin
+            _, vectors = leading_eigenpairs(subgraph, k_connected, seed=seed)
         # Shi & Malik's generalized eigenvectors are these scaled per node by D^-1/2; the
         # discretisation normalises every row, which undoes that scaling, so it is skipped
         # (a node of nearly zero degree would overflow it)

@@ -6,9 +6,9 @@ import rasterio.features
 
 from gisroads.evaluate import buffer_metrics
 from gisroads.geo import GeoRaster
-from gisroads.imagery.pipeline import (PROBABILITY_METHOD, extract_image_roads,
-                                       pinned_threads, resolve_model)
+from gisroads.imagery.pipeline import PROBABILITY_METHOD, extract_image_roads, resolve_model
 from gisroads.learn import RoadModel, save_model
+from gisroads.parallel import pinned_threads
 from gisroads.synthetic import make_scene, render_image
 
 
