@@ -232,7 +232,8 @@ def _cloud_from_points(points, crs, source_crs, units: LasUnits) -> PointCloud:
 
 def iter_las_chunks(path, *, chunk_size: int = DEFAULT_CHUNK,
                     bbox: tuple[float, float, float, float] | None = None,
-                    start: int = 0, stop: int | None = None) -> Iterator[PointCloud]:
+                    start: int = 0, stop: int | None = None,
+                    parallel_decoding: bool = True) -> Iterator[PointCloud]:
     """Stream a LAS/LAZ file as :class:`PointCloud` chunks, so any file size fits in memory.
 
     Parameters
@@ -245,6 +246,9 @@ def iter_las_chunks(path, *, chunk_size: int = DEFAULT_CHUNK,
     start, stop : int, optional
         Only the points ``start:stop`` of the file, in its order (a LAZ file is decoded
         from the compressed chunk holding ``start``, not from its beginning).
+    parallel_decoding : bool
+        Decode a LAZ file's compressed chunks on every core (False: on this thread only,
+        as a task on one worker of several should).
 
     Raises
     ------
@@ -252,6 +256,8 @@ def iter_las_chunks(path, *, chunk_size: int = DEFAULT_CHUNK,
         Missing, empty, truncated or corrupt file (also mid-stream, for a corrupt chunk).
     """
     with _open(path, decoded=_DECODED) as reader:
+        if not parallel_decoding:
+            reader.laz_backend = laspy.LazBackend.Lazrs
         source_crs = las_crs(reader.header)
         units = las_units(reader.header, source_crs)
         crs = metre_crs(source_crs, units)

@@ -324,13 +324,15 @@ def open_store(source, work_dir=None, *, tile_m: float = 300.0, overlap_m: float
         raise
 
 
-def _bucket_part(folder: Path, origin, stride: float, chunk_size: int, part) -> dict:
+def _bucket_part(folder: Path, origin, stride: float, chunk_size: int,
+                 parallel_decoding: bool, part) -> dict:
     """Decode the points ``start:stop`` of one input and append each to the file of its
     stride cell and this part; ``{(row, col): points}``."""
     number, path, start, stop, first_index = part
     cells: dict = {}
     done = first_index
-    for chunk in iter_las_chunks(path, chunk_size=chunk_size, start=start, stop=stop):
+    for chunk in iter_las_chunks(path, chunk_size=chunk_size, start=start, stop=stop,
+                                 parallel_decoding=parallel_decoding):
         cell = np.floor((chunk.xyz[:, :2] - origin) / stride).astype(np.int64)
         # one key per cell, ordered row by row; points keep their file order inside
         lo = cell.min(axis=0)
@@ -377,8 +379,11 @@ def _build(folder: Path, paths, infos, extent, crs, key, *, tile_m, overlap_m, c
             cells[cell] = cells.get(cell, 0) + n
             holding.setdefault(cell, []).append(number)
     report(progress, 0.0, f"bucketing {first_index} points into tiles")
+    # one thread per worker when the parts run on several (as the tiles' BLAS threads);
+    # in this process alone, the file's chunks are decoded on every core
+    alone = workers == 1 and scheduler is None
     for_each_result(partial(_bucket_part, folder, np.array(extent[:2]), tile_m - overlap_m,
-                            chunk_size), parts, bucketed, workers=workers,
+                            chunk_size, alone), parts, bucketed, workers=workers,
                     scheduler=scheduler, progress=progress, what="parts of the input read")
     report(progress, 1.0, "points bucketed")
     store = TileStore(folder, list(paths), extent, int(sum(cells.values())), float(tile_m),
