@@ -32,7 +32,27 @@ from pathlib import Path
 
 
 def _run(cloud: str, work: str, out: str, workers: int) -> dict:
-    """One end-to-end run in this interpreter (called in a subprocess by :func:`measure`)."""
+    """One end-to-end run in this interpreter (called in a subprocess by :func:`measure`):
+    the reading pass timed alone, then the job on its tile store."""
+    from gisroads.parallel import shared_workers
+
+    with shared_workers():  # one cluster for both, as in the job alone
+        figures = _stages(cloud, work, out, workers)
+    # after the cluster's end: its worker processes are then counted among the children
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    own, children = me.ru_maxrss / 1024, kids.ru_maxrss / 1024
+    return {**figures,
+            # CPU seconds of this process and its worker processes: the work done, which
+            # other jobs on a shared machine do not change (wall time they do)
+            "cpu_s": me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime,
+            "peak_rss_driver_mb": own,
+            # the largest worker process (a LocalCluster's workers are our descendants)
+            "peak_rss_worker_mb": own if workers == 1 else children}
+
+
+def _stages(cloud: str, work: str, out: str, workers: int) -> dict:
+    """The run's wall times: the reading pass, the tiles, the network, the writing."""
     from gisroads.jobs.lidar import lidar_job
     from gisroads.lidar.tilestore import open_store
 
@@ -52,21 +72,12 @@ def _run(cloud: str, work: str, out: str, workers: int) -> dict:
     end = time.perf_counter()
     tiles_end = marks.get("tiles_last", end)
     writing = marks.get("writing", end)
-    me = resource.getrusage(resource.RUSAGE_SELF)
-    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    own, children = me.ru_maxrss / 1024, kids.ru_maxrss / 1024
     return {"workers": workers, "points": store.point_count, "tiles": result["tiles_run"],
             "read_s": read_s, "tiles_and_network_s": total_s - read_s, "total_s": total_s,
             # the stages after the reading pass: the tiles, the network stitched from their
             # centre lines, the layers written one tile at a time
             "tiles_s": tiles_end - start - read_s, "network_s": writing - tiles_end,
-            "writing_s": end - writing,
-            # CPU seconds of this process and its worker processes: the work done, which
-            # other jobs on a shared machine do not change (wall time they do)
-            "cpu_s": me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime,
-            "peak_rss_driver_mb": own,
-            # the largest worker process (a LocalCluster's workers are our descendants)
-            "peak_rss_worker_mb": own if workers == 1 else children}
+            "writing_s": end - writing}
 
 
 def measure(out: Path, *, sides_km=(1.0, 2.0), density: float = 10.0, workers=(1, 2),

@@ -20,6 +20,7 @@ import pickle
 import subprocess
 import sys
 import time
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -115,6 +116,62 @@ def _spawning_with(executable: str):
         spawn.set_executable(before)
 
 
+_SHARED: ContextVar[dict | None] = ContextVar("gisroads_shared_workers", default=None)
+
+
+@contextlib.contextmanager
+def shared_workers():
+    """Within the block, the rounds of tasks :func:`for_each_result` runs with the same
+    ``workers`` (or ``scheduler``) share one Dask client and local cluster, started by the
+    first round and closed when the block ends: a local cluster takes seconds to start (its
+    workers import the library), and a job runs two rounds (the reading pass, the tiles).
+    Nested blocks use the outermost one."""
+    if _SHARED.get() is not None:
+        yield
+        return
+    with contextlib.ExitStack() as stack:
+        token = _SHARED.set({"stack": stack, "clients": {}})
+        try:
+            yield
+        finally:
+            _SHARED.reset(token)
+
+
+def _client(stack: contextlib.ExitStack, workers: int, scheduler: str | None, tasks: int):
+    """A Dask client of a new local cluster of ``workers`` (at most ``tasks``) workers or
+    of ``scheduler``, closed with ``stack``; inside :func:`shared_workers`, that block's."""
+    shared = _SHARED.get()
+    if shared is not None:
+        key = (workers, scheduler)
+        if key not in shared["clients"]:
+            shared["clients"][key] = _connect(shared["stack"], workers, scheduler)
+        return shared["clients"][key]
+    return _connect(stack, min(workers, tasks), scheduler)
+
+
+def _connect(stack: contextlib.ExitStack, workers: int, scheduler: str | None):
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        return stack.enter_context(Client(scheduler))
+    import dask
+
+    # Dask sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which makes glibc return
+    # every freed block over 64 KiB to the system: the tiles' numpy temporaries then
+    # cost 1.7x the CPU seconds they take in this process (measured, 6 tiles: 10.4 s
+    # against 6.1 s). The workers keep the other variables (one BLAS/OpenMP thread).
+    environ = {k: v for k, v in (dask.config.get("distributed.nanny.pre-spawn-environ",
+                                                 None) or {}).items()
+               if k != "MALLOC_TRIM_THRESHOLD_"}
+    stack.enter_context(dask.config.set({"distributed.nanny.pre-spawn-environ": environ}))
+    # for the cluster's lifetime: a nanny restarts a lost worker the same way
+    stack.enter_context(_spawning_with(worker_python()))
+    cluster = stack.enter_context(LocalCluster(
+        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0"))
+    return stack.enter_context(Client(cluster))
+
+
+
 def progress_message(done: int, total: int, started: float, what: str = "tiles") -> str:
     """``"12 of 25 tiles done, about 1:05 left"``."""
     return f"{done} of {total} {what} done{_eta(done, total, started)}"
@@ -168,33 +225,14 @@ def for_each_result(func: Callable, items: Sequence, on_result: Callable, *, wor
                                                                     started, what))
         return
     try:
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import as_completed
     except ImportError:
         raise ValueError("running tiles on several workers or a scheduler needs Dask "
                          "(pip install 'dask[distributed]', or Debian's python3-distributed);"
                          " use one worker") from None
 
     with contextlib.ExitStack() as stack:
-        if scheduler is None:
-            import dask
-
-            # Dask sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which makes glibc return
-            # every freed block over 64 KiB to the system: the tiles' numpy temporaries then
-            # cost 1.7x the CPU seconds they take in this process (measured, 6 tiles: 10.4 s
-            # against 6.1 s). The workers keep the other variables (one BLAS/OpenMP thread).
-            environ = {k: v for k, v in (dask.config.get("distributed.nanny.pre-spawn-environ",
-                                                         None) or {}).items()
-                       if k != "MALLOC_TRIM_THRESHOLD_"}
-            stack.enter_context(dask.config.set(
-                {"distributed.nanny.pre-spawn-environ": environ}))
-            # for the cluster's lifetime: a nanny restarts a lost worker the same way
-            stack.enter_context(_spawning_with(worker_python()))
-            cluster = stack.enter_context(LocalCluster(
-                n_workers=min(workers, len(items)), threads_per_worker=1, processes=True,
-                dashboard_address=":0"))
-            client = stack.enter_context(Client(cluster))
-        else:
-            client = stack.enter_context(Client(scheduler))
+        client = _client(stack, workers, scheduler, len(items))
         report(progress, 0.0, f"{len(items)} {what} on "
                               f"{len(client.scheduler_info()['workers'])} Dask workers")
         live = {}

@@ -36,7 +36,7 @@ from ..features.edges import local_energy
 from ..geo import GeoRaster, RoadNetwork
 from ..io.las import PointCloud
 from ..io.raster import geotiff_writer
-from ..parallel import NOT_KEPT, for_each_result, keep_result, kept_result
+from ..parallel import NOT_KEPT, for_each_result, keep_result, kept_result, shared_workers
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.rasters import raster_to_network
@@ -530,26 +530,28 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
     """
     if cue not in CUES:
         raise ValueError(f"cue must be one of {CUES}, not {cue!r}")
-    parallel = dict(workers=workers, scheduler=scheduler, work_dir=work_dir)
-    if cue == "evidence":
-        roads = _evidence_roads(path, threshold=threshold, network_options=network_options,
-                                progress=progress, tile_m=tile_m, overlap_m=overlap_m,
-                                cell_m=cell_m, min_points=min_points, **parallel)
-        tiled = TiledRoads(roads.network, cue, tiles=[], files=[], levels=0, imaged=False,
-                           evidence=roads.evidence, cues=roads.cues, run=roads.run)
-    else:
-        store = open_store(path, work_dir, tile_m=tile_m, overlap_m=overlap_m,
-                           workers=workers, scheduler=scheduler,
-                           progress=scaled(progress, 0.0, 0.1))
-        try:
-            tiled = _intensity_roads(store, cell_m=cell_m, min_points=min_points, options=dict(
-                widths_m=tuple(widths_m), lengths_m=tuple(lengths_m), n_segments=n_segments,
-                t_planar=t_planar, t_vert=t_vert), progress=scaled(progress, 0.1, 0.95),
-                **parallel)
-        except BaseException:
-            if work_dir is None:
-                store.remove()
-            raise
+    with shared_workers():  # one cluster for the reading pass and the tiles
+        parallel = dict(workers=workers, scheduler=scheduler, work_dir=work_dir)
+        if cue == "evidence":
+            roads = _evidence_roads(path, threshold=threshold, network_options=network_options,
+                                    progress=progress, tile_m=tile_m, overlap_m=overlap_m,
+                                    cell_m=cell_m, min_points=min_points, **parallel)
+            tiled = TiledRoads(roads.network, cue, tiles=[], files=[], levels=0, imaged=False,
+                               evidence=roads.evidence, cues=roads.cues, run=roads.run)
+        else:
+            store = open_store(path, work_dir, tile_m=tile_m, overlap_m=overlap_m,
+                               workers=workers, scheduler=scheduler,
+                               progress=scaled(progress, 0.0, 0.1))
+            try:
+                options = dict(widths_m=tuple(widths_m), lengths_m=tuple(lengths_m),
+                               n_segments=n_segments, t_planar=t_planar, t_vert=t_vert)
+                tiled = _intensity_roads(store, cell_m=cell_m, min_points=min_points,
+                                         options=options, progress=scaled(progress, 0.1, 0.95),
+                                         **parallel)
+            except BaseException:
+                if work_dir is None:
+                    store.remove()
+                raise
     if lazy:
         return tiled
     with tiled:

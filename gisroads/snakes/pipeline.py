@@ -27,7 +27,7 @@ from ..geo import GeoRaster, RoadNetwork
 from ..io.las import cloud_crs, write_classified
 from ..lidar.tagging import ROAD_SURFACE_CLASS
 from ..lidar.tilestore import digest
-from ..parallel import NOT_KEPT, keep_result, kept_result, run_tasks
+from ..parallel import NOT_KEPT, keep_result, kept_result, run_tasks, shared_workers
 from ..progress import Progress, report, scaled
 from ..vectorize.ribbons import ribbon_areas, ribbons_to_network
 from .attractor import ALPHA_ATTR, BETA_ATTR, LANE_M, MIN_NEIGHBOURS, attractor_map
@@ -568,27 +568,29 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
     from ..lidar.tilestore import open_store
 
     lines, working = _map_in_cloud_crs(cloud_path, map_lines)
-    store = open_store(cloud_path, work_dir, tile_m=PATCH_CELL_M, overlap_m=0.0,
-                       workers=workers, scheduler=scheduler,
-                       progress=scaled(progress, 0.0, 0.1))
-    try:
-        registered = _register(store, cloud_path, lines, snap_m,
-                               progress=scaled(progress, 0.1, 0.3))
-        crs = working if working is not None else lines.crs
-        options = dict(curb_detector=curb_detector, cell_m=cell_m, **fit_options)
-        results = None
-        if work_dir is not None:
-            results = Path(work_dir) / f"patches-{digest([store.key, options, _code_fingerprint()])}"
-            results.mkdir(parents=True, exist_ok=True)
-        job = _PatchJob(store, crs, options, tagged_las is not None, attractor, results)
-        outcomes = [o for o in run_tasks(partial(fit_patch, job), one_road_maps(registered),
-                                         workers=workers, scheduler=scheduler,
-                                         progress=scaled(progress, 0.3, 0.8),
-                                         what="road patches")
-                    if o is not None]
-    finally:
-        if work_dir is None:
-            store.remove()
+    with shared_workers():  # one cluster for the reading pass and the patches
+        store = open_store(cloud_path, work_dir, tile_m=PATCH_CELL_M, overlap_m=0.0,
+                           workers=workers, scheduler=scheduler,
+                           progress=scaled(progress, 0.0, 0.1))
+        try:
+            registered = _register(store, cloud_path, lines, snap_m,
+                                   progress=scaled(progress, 0.1, 0.3))
+            crs = working if working is not None else lines.crs
+            options = dict(curb_detector=curb_detector, cell_m=cell_m, **fit_options)
+            results = None
+            if work_dir is not None:
+                key = digest([store.key, options, _code_fingerprint()])
+                results = Path(work_dir) / f"patches-{key}"
+                results.mkdir(parents=True, exist_ok=True)
+            job = _PatchJob(store, crs, options, tagged_las is not None, attractor, results)
+            outcomes = [o for o in run_tasks(partial(fit_patch, job), one_road_maps(registered),
+                                             workers=workers, scheduler=scheduler,
+                                             progress=scaled(progress, 0.3, 0.8),
+                                             what="road patches")
+                        if o is not None]
+        finally:
+            if work_dir is None:
+                store.remove()
     if not outcomes:
         raise ValueError(f"{cloud_path}: no road patch holds enough points along the map")
     ribbons = [ribbon for ribbon, _ in outcomes]

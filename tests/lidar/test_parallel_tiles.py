@@ -11,7 +11,7 @@ import pytest
 
 from gisroads.io.vector import read_layer
 from gisroads.lidar.pipeline import extract_roads
-from gisroads.parallel import progress_message, run_tasks, worker_python
+from gisroads.parallel import progress_message, run_tasks, shared_workers, worker_python
 from tests.lidar.tile_runs import ENV, GISROADS, assert_same_geometries
 
 
@@ -30,6 +30,22 @@ def test_results_come_back_in_the_items_order_here_and_on_dask():
     assert seen[-1].startswith("7 of 7 tiles done")
     assert run_tasks(_square, items, workers=2) == [x * x for x in items]
     assert progress_message(1, 4, time.monotonic() - 10).endswith("about 0:30 left")
+
+
+def _worker_pid(_):
+    time.sleep(0.05)
+    return os.getpid()
+
+
+def test_rounds_of_tasks_in_a_shared_block_run_on_one_cluster():
+    alone = [set(run_tasks(_worker_pid, range(8), workers=2)) for _ in range(2)]
+    assert alone[0].isdisjoint(alone[1])  # a cluster per round: new worker processes
+    with shared_workers():
+        first = set(run_tasks(_worker_pid, range(8), workers=2))
+        with shared_workers():  # nested: the outer block's cluster
+            second = set(run_tasks(_worker_pid, range(8), workers=2))
+    assert first == second and len(first) == 2 and os.getpid() not in first
+    assert set(run_tasks(_worker_pid, range(8), workers=2)).isdisjoint(first)
 
 
 def test_workers_start_with_this_installation_when_sys_executable_is_another(monkeypatch,
