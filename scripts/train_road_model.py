@@ -103,8 +103,21 @@ TRIED = """
     beside the railway and the paved road at the bottom, not the sandy tracks across its
     fields; the model misses the paved road and draws loops around ploughed fields, so
     343 hangs on the one line beside the railway (quality 0.14 here, 0.11 with seed 1,
-    0.02-0.04 for the texture models at higher pixel AUC, 0.78-0.84 against 0.77). 104 (a desert village) has no grey surface,
-    so the model is not adapted there and finds none of its streets at 0.4.
+    0.02-0.04 for the texture models at higher pixel AUC, 0.78-0.84 against 0.77). 104
+    (a desert village) has no grey surface, so the model is not adapted there and finds
+    none of its streets at 0.4.
+  - oriented line means over 48 m as well as 24 m (the same eight directions and side
+    offsets, 49 features): quality 0.293 / 0.294 at seeds 0 / 1 against 0.270 / 0.256,
+    AUC 0.805 / 0.814; 0.116 / 0.274 / 0.274 / 0.038 / 0.449 and 0.106 / 0.262 / 0.281 /
+    0.029 / 0.456 (at 0.3 / 0.5: 0.283 / 0.295 and 0.292 / 0.290). The one option that
+    gains beyond the seed noise at both seeds, Massachusetts at or above its baseline at
+    both, ETH 001 / 007 0.54 -> 0.68 / 0.27 -> 0.41 (a narrow street found); but
+    DeepGlobe further under its baseline (343: 0.08 / 0.06), and the dense 80-pixel line
+    kernels make the features 4 times slower (512 x 512 at 0.6 m: 1.1 s against 0.27 s,
+    one run on the shared machine).
+    Not kept for lack of time to retrain and score it here; the next step is these long
+    lines on a 1.2 m grid (or as sparse shifted sums) to keep the feature time, then this
+    script and the bench.
 """
 MIN_LINE_M = 10.0
 """Skeleton lines shorter than this are dropped before the buffer scores, metres."""
