@@ -41,7 +41,10 @@ def _run(cloud: str, work: str, out: str, workers: int) -> dict:
     # after the cluster's end: its worker processes are then counted among the children
     me = resource.getrusage(resource.RUSAGE_SELF)
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    own, children = me.ru_maxrss / 1024, kids.ru_maxrss / 1024
+    # this process's own peak: ru_maxrss would also hold the bench process's size when it
+    # started this one (Linux keeps a forked process's high-water mark across exec)
+    own = _peak_rss_mb()
+    children = kids.ru_maxrss / 1024
     return {**figures,
             # CPU seconds of this process and its worker processes: the work done, which
             # other jobs on a shared machine do not change (wall time they do)
@@ -49,6 +52,14 @@ def _run(cloud: str, work: str, out: str, workers: int) -> dict:
             "peak_rss_driver_mb": own,
             # the largest worker process (a LocalCluster's workers are our descendants)
             "peak_rss_worker_mb": own if workers == 1 else children}
+
+
+def _peak_rss_mb() -> float:
+    """This process's peak resident memory since it started its program (VmHWM)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def _stages(cloud: str, work: str, out: str, workers: int) -> dict:
