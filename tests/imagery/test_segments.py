@@ -53,6 +53,16 @@ def road_strip_image(seed=0, bands=3):
     return colour + rng.normal(0, 4, colour.shape), road
 
 
+def textured_halves(n=192):
+    """``(east half, data, rng)``: 4 bands of one blocky texture of +-40 over both halves
+    of an n x n image, with noise, so that no colour tells the halves apart."""
+    rng = np.random.default_rng(0)
+    east = np.zeros((n, n), bool)
+    east[:, n // 2:] = True
+    texture = np.kron(rng.uniform(-40, 40, (n // 8, n // 8)), np.ones((8, 8)))
+    return east, 100.0 + texture[None] + rng.normal(0, 3, (4, n, n)), rng
+
+
 def test_segment_borders_fall_on_road_edges_of_a_hand_made_strip():
     data, road = road_strip_image()
     labels = segment_image(raster(data.astype(np.float32)), n_segments=24)
@@ -84,12 +94,7 @@ def test_panchromatic_image_with_nodata_is_segmented_and_nodata_is_minus_one():
 def test_the_ndvi_factor_separates_verge_from_road_of_equal_brightness():
     """Road and verge share the same textured R, G, B; the verge is brighter in NIR only
     by less than the texture's contrast, so colour alone does not prefer their border."""
-    rng = np.random.default_rng(0)
-    n = 192
-    verge = np.zeros((n, n), bool)
-    verge[:, 96:] = True
-    texture = np.kron(rng.uniform(-40, 40, (n // 8, n // 8)), np.ones((8, 8)))
-    data = 100.0 + texture[None] + rng.normal(0, 3, (4, n, n))
+    verge, data, _ = textured_halves()
     data[3][verge] += 30  # NDVI about 0 on the road, 0.08-0.2 on the verge
     image = raster(np.clip(data, 1, 255).astype(np.float32))
     options = dict(nir_band=4, ndvi_threshold=0.07, n_segments=12, n_superpixels=300)
@@ -120,12 +125,8 @@ def test_the_road_probability_separates_road_from_a_neighbour_of_its_colour():
     """The same textured colours on both sides (a road beside a dark roof): only a learned
     road probability (0.8 against 0.1, with noise) tells them apart; combined with the NDVI
     factor (a NIR band that does not differ) it still does."""
-    rng = np.random.default_rng(0)
-    n = 192
-    road = np.zeros((n, n), bool)
-    road[:, 96:] = True
-    texture = np.kron(rng.uniform(-40, 40, (n // 8, n // 8)), np.ones((8, 8)))
-    data = 100.0 + texture[None] + rng.normal(0, 3, (4, n, n))
+    road, data, rng = textured_halves()
+    n = len(road)
     image = raster(np.clip(data, 1, 255).astype(np.float32))
     probability = np.clip(np.where(road, 0.8, 0.1) + rng.normal(0, 0.05, (n, n)), 0, 1)
     options = dict(n_segments=12, n_superpixels=300)
