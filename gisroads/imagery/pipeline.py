@@ -214,6 +214,23 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
                         progress=progress)
 
 
+class _StageClock:
+    """``lap(stage)`` adds the seconds since the last lap (or start) to ``timings[stage]``:
+    a stage run in several tiles sums their times."""
+
+    def __init__(self, timings: dict):
+        self.timings = timings
+        self.restart()
+
+    def restart(self) -> None:
+        self.clock = time.perf_counter()
+
+    def __call__(self, stage: str) -> None:
+        now = time.perf_counter()
+        self.timings[stage] = self.timings.get(stage, 0.0) + now - self.clock
+        self.clock = now
+
+
 def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, gap_options,
              weight_options, network_options, model, adapt, probability, method,
              probability_threshold, tile_px, progress) -> ImageRoads:
@@ -221,14 +238,7 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
         raise ValueError("the image must be in a projected CRS in metres (reproject it, "
                          "e.g. to its UTM zone)")
     timings = {}
-    clock = time.perf_counter()
-
-    def lap(stage: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[stage] = now - clock
-        clock = now
-
+    lap = _StageClock(timings)
     if probability is None and resolve_model(model) is not None:
         probability = road_probability(image, model, adapt=adapt,
                                        progress=scaled(progress, 0.0, 0.15))
@@ -267,7 +277,7 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
         strings, qa, record, counts = _road_strings(
             image, probability, timings=timings, progress=scaled(progress, 0.0, 0.85),
             **stages)
-    clock = time.perf_counter()
+    lap.restart()  # the tiled stages kept their own times
     network, connections = strings_to_network(strings, extent=image.bounds, crs=image.crs,
                                               method=METHOD, progress=scaled(progress, 0.85, 1.0),
                                               **(network_options or {}))
@@ -289,14 +299,7 @@ def _road_strings(image: GeoRaster, probability: GeoRaster | None, *, nir_band, 
                   timings: dict, progress: Progress):
     """The papers' stages up to the road strings on one image (or tile): ``(strings, qa,
     cues record, counts)``; each stage's seconds are added to ``timings``."""
-    clock = time.perf_counter()
-
-    def lap(stage: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[stage] = timings.get(stage, 0.0) + now - clock
-        clock = now
-
+    lap = _StageClock(timings)
     report(progress, 0.0, "image cues")
     cues = image_cues(image, nir_band=nir_band, red_band=red_band, dsm=dsm)
     if probability is not None:
