@@ -106,27 +106,27 @@ def road_probability(image: GeoRaster, model="default", *, adapt: bool = True,
     """The learned road probability of an image (float32 in [0, 1], NaN where no data).
 
     ``adapt`` adapts the model to the image from its own most confident pixels first
-    (:func:`gisroads.learn.adapt_to_image`, needs scikit-learn; without it the model is
-    used as it is), taking as road samples only those of road colour
+    (:func:`gisroads.learn.training.adapted_probability`, needs scikit-learn; without it
+    the model is used as it is), taking as road samples only those of road colour
     (:func:`gisroads.imagery.baseline.road_colour_mask`), the naive baseline's cue: the
     model's confident errors on other sensors are not grey."""
+    from importlib.util import find_spec
+
     from ..learn.model import predict_probability
     from .baseline import road_colour_mask
 
     model = resolve_model(model)
     if model is None:
         raise ValueError("no model")
-    if adapt:
-        report(progress, 0.0, "adapting the road model to the image")
-        try:
-            from ..learn.training import adapt_to_image
-            model = adapt_to_image(image, model, road_like=road_colour_mask(image))
-        except ImportError:  # scikit-learn missing: the model as it is
-            pass
-    report(progress, 0.5, "road probability")
+    if adapt and find_spec("sklearn") is not None:
+        from ..learn.training import adapted_probability
+        return adapted_probability(image, model, road_like=road_colour_mask(image),
+                                   progress=progress)
+    report(progress, 0.0, "road probability")
     probability = predict_probability(image, model)
     report(progress, 1.0, "road probability")
     return probability
+
 
 class ImageRoads(NamedTuple):
     """Result of :func:`extract_image_roads`."""

@@ -91,9 +91,10 @@ class RoadModel:
         n = X.shape[1]
         out = np.full(n, self.baseline, np.float64)
         # deepest trees first: at level k only the first active[k] trees still move
-        order = np.argsort(-self.tree_depth, kind="stable")
+        tree_depth = self.tree_depth
+        order = np.argsort(-tree_depth, kind="stable")
         roots = self.roots[order].astype(np.int64)
-        active = (self.tree_depth[order][None, :] > np.arange(self.depth)[:, None]).sum(axis=1)
+        active = (tree_depth[order][None, :] > np.arange(self.depth)[:, None]).sum(axis=1)
         left = self.left.astype(np.int64)
         # float32 features against float32 thresholds rounded down: x > t exactly when
         # x > t32 for every float32 x, and faster than comparing in float64
@@ -121,7 +122,12 @@ class RoadModel:
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         """Road probability of samples ``X`` of shape ``(n_features, n)``, float64."""
-        return 1.0 / (1.0 + np.exp(-self.decision(X)))
+        return sigmoid(self.decision(X))
+
+
+def sigmoid(log_odds: np.ndarray) -> np.ndarray:
+    """Probability of log-odds, ``1 / (1 + exp(-log_odds))`` (NaN stays NaN)."""
+    return 1.0 / (1.0 + np.exp(-log_odds))
 
 
 def from_sklearn(classifier, feature_names, *, metadata=None) -> RoadModel:
@@ -340,6 +346,12 @@ class WorkGrid:
     ----------
     image : GeoRaster
         1-band or 3+-band image (bands past the third ignored) in a projected metre CRS.
+    cache_mb : float
+        Keep the features of each window :meth:`features` returns, so that a second
+        request of the same window does not compute them again, while the kept features
+        take at most this many megabytes (float32, ``n_features x rows x cols`` of the
+        grid's cores); 0 keeps none. Windows asked for after the budget is spent are
+        computed each time, so memory stays bounded on any image.
 
     Attributes
     ----------
@@ -352,7 +364,7 @@ class WorkGrid:
     stats : ImageStatistics
     """
 
-    def __init__(self, image: GeoRaster):
+    def __init__(self, image: GeoRaster, *, cache_mb: float = 0.0):
         pixel = ft.metric_pixel_size(image)
         ft.rgb_bands(np.asarray(image.data)[..., :1, :1])  # band count check
         self.image = image
@@ -365,6 +377,8 @@ class WorkGrid:
         sample = [self.bands(r, r + 1, 0, self.shape[1]) for r in range(0, self.shape[0], step)]
         self.stats = ft.image_statistics(np.concatenate([b for b, _ in sample], axis=1),
                                          np.concatenate([v for _, v in sample]))
+        self._cache: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+        self._cache_left = int(cache_mb * 2 ** 20)
 
     @property
     def transform(self) -> Affine:
@@ -381,14 +395,25 @@ class WorkGrid:
     def features(self, r0: int, r1: int, c0: int, c1: int
                  ) -> tuple[np.ndarray, np.ndarray]:
         """Features ``(n_features, rows, cols)`` and valid mask of a work window, computed
-        with a halo so that they equal those of the whole image."""
+        with a halo so that they equal those of the whole image (read-only arrays when
+        kept in the cache, see ``cache_mb``)."""
+        key = (r0, r1, c0, c1)
+        if key in self._cache:
+            return self._cache[key]
         rows, cols = self.shape
         h0, h1 = max(0, r0 - self.halo), min(rows, r1 + self.halo)
         k0, k1 = max(0, c0 - self.halo), min(cols, c1 + self.halo)
         bands, valid = self.bands(h0, h1, k0, k1)
         values = ft.compute_features(bands, valid, self.pixel_m, self.stats)
         core = (slice(r0 - h0, r1 - h0), slice(c0 - k0, c1 - k0))
-        return values[(slice(None), *core)], valid[core]
+        values, valid = values[(slice(None), *core)], valid[core]
+        if values.nbytes <= self._cache_left:
+            # a copy of the core, so that the halo's features are freed
+            values, valid = np.ascontiguousarray(values), valid.copy()
+            values.flags.writeable = valid.flags.writeable = False
+            self._cache[key] = values, valid
+            self._cache_left -= values.nbytes
+        return values, valid
 
     def tiles(self, tile_px: int):
         """Work windows ``(r0, r1, c0, c1)`` of at most ``tile_px`` square covering the
@@ -410,14 +435,30 @@ class WorkGrid:
         return np.repeat(np.repeat(work, f, axis=0), f, axis=1)[:rows, :cols]
 
 
-def work_probability(grid: WorkGrid, model: RoadModel, *, tile_px: int = 512) -> np.ndarray:
-    """Road probability on a :class:`WorkGrid`, float32, NaN where no data."""
-    out = np.full(grid.shape, np.nan, np.float32)
+def work_decision(grid: WorkGrid, model: RoadModel, *, tile_px: int = 512) -> np.ndarray:
+    """Log-odds of road on a :class:`WorkGrid` (:meth:`RoadModel.decision`), float64, NaN
+    where no data."""
+    out = np.full(grid.shape, np.nan, np.float64)
     for r0, r1, c0, c1 in grid.tiles(tile_px):
         values, valid = grid.features(r0, r1, c0, c1)
-        p = model.predict(values[:, valid])
-        out[r0:r1, c0:c1][valid] = p
+        # a tile with data everywhere is read as it lies (selecting costs 20 ms a tile)
+        X = values.reshape(len(values), -1) if valid.all() else values[:, valid]
+        out[r0:r1, c0:c1][valid] = model.decision(X)
     return out
+
+
+def work_probability(grid: WorkGrid, model: RoadModel, *, tile_px: int = 512) -> np.ndarray:
+    """Road probability on a :class:`WorkGrid`, float32, NaN where no data."""
+    return sigmoid(work_decision(grid, model, tile_px=tile_px)).astype(np.float32)
+
+
+def image_probability(grid: WorkGrid, work: np.ndarray) -> GeoRaster:
+    """A work-grid probability (:func:`work_probability`) as a float32 raster on the grid's
+    image, NaN where the image has no data (see :func:`predict_probability`)."""
+    image = grid.image
+    probability = np.where(ft.valid_pixels(image), grid.to_image(work), np.float32(np.nan))
+    return GeoRaster(probability.astype(np.float32, copy=False), image.transform, image.crs,
+                     float("nan"))
 
 
 def predict_probability(image: GeoRaster, model: RoadModel | None = None, *,
@@ -449,10 +490,7 @@ def predict_probability(image: GeoRaster, model: RoadModel | None = None, *,
     """
     model = load_model() if model is None else model
     grid = WorkGrid(image)
-    probability = grid.to_image(work_probability(grid, model, tile_px=tile_px))
-    probability = np.where(ft.valid_pixels(image), probability, np.float32(np.nan))
-    return GeoRaster(probability.astype(np.float32, copy=False), image.transform, image.crs,
-                     float("nan"))
+    return image_probability(grid, work_probability(grid, model, tile_px=tile_px))
 
 
 def with_metadata(model: RoadModel, **entries) -> RoadModel:

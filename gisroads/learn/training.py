@@ -10,8 +10,10 @@ Three sources, each giving balanced, seeded feature samples ``X`` of shape
 - :func:`train_from_layer`: an image with an existing road layer over it (the agency case),
   positives from a core band along the lines, negatives beyond a guard band;
 - :func:`adapt_to_image`: an image and a model, the model's most confident pixels as
-  labels; a second model fitted to them is blended with the first (self-adaptation to an
-  image's sensor, season and pixel size).
+  labels; a second model fitted to them (:func:`fit_to_image`) is blended with the first
+  (self-adaptation to an image's sensor, season and pixel size);
+  :func:`adapted_probability` gives the adapted model's probability of the image directly,
+  computing the features once.
 """
 from __future__ import annotations
 
@@ -26,7 +28,8 @@ from scipy import ndimage
 from ..geo import GeoRaster
 from ..progress import Progress, report
 from . import features as ft
-from .model import RoadModel, WorkGrid, blend_models, fit_model, work_probability
+from .model import (RoadModel, WorkGrid, blend_models, fit_model, image_probability, sigmoid,
+                    work_decision, work_probability)
 
 TRAINING_PIXEL_M = (0.45, 0.6, 0.8, 1.0, 1.2)
 """Pixel sizes the labelled tiles are rescaled to, metres."""
@@ -348,12 +351,12 @@ def _on_work_grid(mask: np.ndarray, grid: WorkGrid) -> np.ndarray:
     return padded.reshape(rows, f, cols, f).mean(axis=(1, 3)) > 0.5
 
 
-def adapt_to_image(image: GeoRaster, model: RoadModel, *, positive_share: float = 0.08,
-                   negative_share: float = 0.5, road_shaped: bool = True,
-                   road_like: np.ndarray | None = None, samples: int = 40_000,
-                   weight: float = 0.75, seed: int = 0, tile_px: int = 512,
-                   max_iter: int = 60, **fit_params) -> RoadModel:
-    """A model adapted to one image from the model's most confident pixels.
+def fit_to_image(grid: WorkGrid, probability: np.ndarray, model: RoadModel, *,
+                 positive_share: float = 0.08, negative_share: float = 0.5,
+                 road_shaped: bool = True, road_like: np.ndarray | None = None,
+                 samples: int = 40_000, seed: int = 0, tile_px: int = 512,
+                 max_iter: int = 60, **fit_params) -> RoadModel | None:
+    """An image's own model, fitted to the most confident pixels of ``model``.
 
     The ``positive_share`` of the image's valid pixels with the highest probability
     become road samples, the ``negative_share`` with the lowest non-road samples (shares,
@@ -361,46 +364,47 @@ def adapt_to_image(image: GeoRaster, model: RoadModel, *, positive_share: float 
     ``road_shaped``, only the road samples in connected parts shaped like roads
     (:func:`elongated`: on the 13 benchmark images this raised the mean held-out pixel AUC
     of the adapted default model from 0.742 to 0.751, 11 images up), and with
-    ``road_like``, only those that an independent cue also takes for road surface. A model
-    fitted to them is blended with ``model`` (log-odds weighted by ``weight``).
+    ``road_like``, only those that an independent cue also takes for road surface.
 
     Parameters
     ----------
-    image : GeoRaster
+    grid : WorkGrid
+        Of the image (give it a ``cache_mb`` to compute the sampled tiles' features only
+        once: they were computed for ``probability``).
+    probability : ndarray of float32, shape ``grid.shape``
+        ``model``'s probability on the grid (:func:`~gisroads.learn.model.work_probability`),
+        NaN where no data.
     model : RoadModel
+        The model the new one is calibrated like (its ``calibrated_road_share``).
     positive_share, negative_share : float
         Shares of the image's valid pixels taken as road and non-road candidates.
     road_shaped : bool
         Road samples only in road-shaped connected parts.
-    road_like : ndarray of bool, shape ``image.shape``, optional
+    road_like : ndarray of bool, shape ``grid.image.shape``, optional
         Pixels whose surface looks like road to a cue that does not share the model's
         errors (:func:`gisroads.imagery.baseline.road_colour_mask`: grey, neither shadow
         nor white). The model's confident errors under domain shift (forest gaps and
         shadows at 1 m, field margins) are not grey, so the adapted model does not learn
         them back: on the 13 benchmark images, mean held-out pixel AUC 0.799 against
         0.751 and mean quality through the network stage 0.270 against 0.185 (with
-        ``positive_share`` 0.08 and ``weight`` 0.75; 0.04 and 0.5 gave 0.253). An image
-        where fewer than 50 road samples pass it (no grey surface: a lawn, a field) keeps
-        the model as it is: adapting to the model's own confident pixels there taught it
-        noise, and a uniform lawn got roads.
+        ``positive_share`` 0.08 and a blend weight of 0.75; 0.04 and 0.5 gave 0.253). An
+        image where fewer than 50 road samples pass it (no grey surface: a lawn, a field)
+        keeps the model as it is: adapting to the model's own confident pixels there
+        taught it noise, and a uniform lawn got roads.
     samples : int
         Samples drawn, half road.
-    weight : float
-        Log-odds weight of the image's own model in the blend.
     seed, tile_px, max_iter, **fit_params
         Of the sampling and :func:`~gisroads.learn.model.fit_model`.
 
     Returns
     -------
-    RoadModel
-        The blend; ``model`` itself when the image has too few confident pixels (road
-        samples after the filters, or non-road samples).
+    RoadModel or None
+        None when the image has too few confident pixels (road samples after the filters,
+        or non-road samples).
     """
-    grid = WorkGrid(image)
-    probability = work_probability(grid, model, tile_px=tile_px)
     valid = np.isfinite(probability)
     if valid.sum() < 100:
-        return model
+        return None
     high, low = np.quantile(probability[valid], [1 - positive_share, negative_share])
     positive = valid & (probability >= high)
     if road_like is not None:
@@ -409,12 +413,85 @@ def adapt_to_image(image: GeoRaster, model: RoadModel, *, positive_share: float 
         positive = elongated(positive, grid.pixel_m)
     negative = valid & (probability <= low)
     if positive.sum() < 50 or negative.sum() < 50:
-        return model
+        return None
     rng = np.random.default_rng(seed)
     X, y = grid_samples(grid, positive, negative, samples, rng, tile_px=tile_px)
     # calibrated like the model it is blended with
-    own = fit_model(X, y, seed=seed, max_iter=max_iter,
-                    road_share=model.metadata.get("calibrated_road_share"),
-                    metadata={"trained_on": "own confident pixels",
-                              "road_like": road_like is not None}, **fit_params)
-    return blend_models(model, own, weight)
+    return fit_model(X, y, seed=seed, max_iter=max_iter,
+                     road_share=model.metadata.get("calibrated_road_share"),
+                     metadata={"trained_on": "own confident pixels",
+                               "road_like": road_like is not None}, **fit_params)
+
+
+ADAPT_CACHE_MB = 256.0
+"""Feature cache of the adaptation, megabytes (:class:`~gisroads.learn.model.WorkGrid`
+``cache_mb``): with 42 float32 features, a work grid of up to 1.6 million pixels (a 1000 x
+1000 image at 1 m, 2000 x 2000 at 0.3 m, read at 0.6 m) has its features computed once,
+not once for the model's probability, once for the samples and once for the adapted
+probability; on a larger image the tiles past the budget are computed again, so memory
+stays bounded."""
+
+
+def adapt_to_image(image: GeoRaster, model: RoadModel, *, weight: float = 0.75,
+                   tile_px: int = 512, **options) -> RoadModel:
+    """A model adapted to one image from the model's most confident pixels: the image's
+    own model (:func:`fit_to_image`) blended with ``model``.
+
+    Parameters
+    ----------
+    image : GeoRaster
+    model : RoadModel
+    weight : float
+        Log-odds weight of the image's own model in the blend.
+    tile_px : int
+        Work-grid tile side of the feature computation.
+    **options
+        Keyword arguments of :func:`fit_to_image` (``road_like``, ``samples``, ...).
+
+    Returns
+    -------
+    RoadModel
+        The blend; ``model`` itself when the image has too few confident pixels.
+    """
+    grid = WorkGrid(image, cache_mb=ADAPT_CACHE_MB)
+    own = fit_to_image(grid, work_probability(grid, model, tile_px=tile_px), model,
+                       tile_px=tile_px, **options)
+    return model if own is None else blend_models(model, own, weight)
+
+
+def adapted_probability(image: GeoRaster, model: RoadModel, *, weight: float = 0.75,
+                        tile_px: int = 512, progress: Progress = None,
+                        **options) -> GeoRaster:
+    """The road probability of the model adapted to the image, that is
+    ``predict_probability(image, adapt_to_image(image, model, ...))`` (the log-odds differ
+    only in the order of their sums), in about half the time: the features are computed
+    once (:data:`ADAPT_CACHE_MB`) and the blend's log-odds are ``model``'s, already
+    computed for the adaptation, mixed with those of the image's own model, so ``model``'s
+    trees are evaluated once.
+
+    Parameters
+    ----------
+    image : GeoRaster
+    model : RoadModel
+    weight, tile_px, **options
+        As :func:`adapt_to_image`.
+    progress : callable, optional
+        ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
+
+    Returns
+    -------
+    GeoRaster
+        As :func:`~gisroads.learn.model.predict_probability`.
+    """
+    grid = WorkGrid(image, cache_mb=ADAPT_CACHE_MB)
+    report(progress, 0.0, "road probability of the model")
+    log_odds = work_decision(grid, model, tile_px=tile_px)
+    report(progress, 0.4, "fitting the model to the image")
+    own = fit_to_image(grid, sigmoid(log_odds).astype(np.float32), model, tile_px=tile_px,
+                       **options)
+    if own is not None:
+        report(progress, 0.6, "road probability of the adapted model")
+        log_odds = (1 - weight) * log_odds + weight * work_decision(grid, own,
+                                                                    tile_px=tile_px)
+    report(progress, 1.0, "road probability")
+    return image_probability(grid, sigmoid(log_odds).astype(np.float32))
