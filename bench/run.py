@@ -46,8 +46,13 @@ imagery_real
     OUT/imagery_real.md; also the papers' road-part centre lines alone. ``pipeline_*`` is the
     default path of extract_image_roads.
 imagery_tile
-    The imagery pipeline on a 1000 x 1000 synthetic RGB tile (0.3 m) on one core, per-stage
-    seconds and scores against the scene's truth, beside the baseline.
+    The default imagery path on 1000 x 1000 tiles on one core, twice each: a synthetic RGB
+    tile (0.3 m) and a Massachusetts crop (1 m): per-stage seconds (the probability's steps:
+    the bundled model's probability, the fit to the image, the adapted probability; the
+    network), the features alone, the probability as computed before issue 15's speed work,
+    scores against the truth beside the naive baseline, each beside a fixed numpy reference
+    workload timed in the same run (the machine may be shared); then once more with a
+    CPU-bound process on the same core (``loaded``).
 city
     Only with ``--city`` (``make bench-city``): a synthetic city streamed to LAZ, end to end
     with 1 and 2 workers (``bench/city.py``): wall and CPU time, seconds per km², peak memory
@@ -476,38 +481,151 @@ def case_imagery_real(out: Path, data_dir: str, datasets=None) -> dict:
     return {**result, "per_image": per_image, "table": table}
 
 
-def case_imagery_tile(out: Path, size_px: int, pixel_m: float) -> dict:
-    """The imagery pipeline on one synthetic RGB tile of ``size_px`` squared, on one core,
-    with its per-stage times, beside the naive baseline."""
+def _reference_s() -> float:
+    """Seconds of a fixed single-threaded numpy workload (10 sorts of 2 M floats): the
+    yardstick of a shared machine's load, timed beside each measured run."""
+    data = np.random.default_rng(0).random(2_000_000)
+    start = time.perf_counter()
+    for _ in range(10):
+        np.sort(data, kind="quicksort")
+    return time.perf_counter() - start
+
+
+_PROBABILITY_STEPS = {"road probability of the model": "probability_model",
+                      "fitting the model to the image": "probability_fit",
+                      "road probability of the adapted model": "probability_adapted"}
+"""The progress messages of :func:`gisroads.learn.training.adapted_probability` that start
+each step of the default path's probability stage, and the step they start."""
+
+
+def _probability_steps(messages: list) -> dict:
+    """Seconds of each step of the probability stage from ``(time, message)`` progress
+    records: a step lasts until the next message after it (the last one until the stage's
+    closing "road probability")."""
+    steps, current = {}, None
+    for when, message in messages:
+        if current is not None and message != current[1]:
+            steps[_PROBABILITY_STEPS[current[1]]] = when - current[0]
+            current = None
+        if message in _PROBABILITY_STEPS and current is None:
+            current = (when, message)
+    return steps
+
+
+def _tile_run(image, *, truth=None, buffer_m=3.0, valid_area=None) -> dict:
+    """The default imagery path on one tile: total and per-stage seconds (the probability's
+    steps from its progress messages), beside the numpy reference timed before and after,
+    the features alone, the probability computed the way it was before issue 15's speed
+    work (the adapted model predicted from scratch: features three times, the bundled
+    model's trees twice), the naive baseline, and scores when a truth is given."""
+    from gisroads.evaluate import buffer_metrics
+    from gisroads.imagery.baseline import road_colour_mask
+    from gisroads.imagery.pipeline import extract_image_roads, pinned_threads
+    from gisroads.learn import adapt_to_image, load_model, predict_probability
+    from gisroads.learn.model import WorkGrid
+
+    reference = _reference_s()
+    messages = []
+    start = time.perf_counter()
+    roads = extract_image_roads(
+        image, progress=lambda fraction, message: messages.append((time.perf_counter(),
+                                                                    message)))
+    total = time.perf_counter() - start
+    entry = {"total_s": total,
+             **{f"stage_{k}_s": v for k, v in roads.report["timings_s"].items()
+                if k != "total"},
+             **{f"stage_{k}_s": v for k, v in _probability_steps(messages).items()}}
+    with pinned_threads(1):
+        grid = WorkGrid(image)
+        start = time.perf_counter()
+        for window in grid.tiles(512):
+            grid.features(*window)
+        entry["features_alone_s"] = time.perf_counter() - start
+        model = load_model()
+        start = time.perf_counter()
+        predict_probability(image, adapt_to_image(image, model,
+                                                  road_like=road_colour_mask(image)))
+        entry["probability_from_scratch_s"] = time.perf_counter() - start
+    (baseline, _), entry["baseline_s"] = _timed(_image_baseline, image)
+    entry["reference_s"] = (reference + _reference_s()) / 2
+    entry["total_over_reference"] = total / entry["reference_s"]
+    entry["roads"] = len(roads.network.centrelines)
+    if truth is not None:
+        for name, network in (("pipeline", roads.network), ("baseline", baseline)):
+            scores = buffer_metrics(network.centrelines, truth, buffer_m=buffer_m,
+                                    valid_area=valid_area)
+            entry.update({f"{name}_{k}": getattr(scores, k) for k in _SCORES})
+    return entry, roads.network
+
+
+def case_imagery_tile(out: Path, size_px: int, pixel_m: float, data_dir: str | None = None,
+                      repeats: int = 2, loaded: bool = True) -> dict:
+    """The default imagery path on 1000 x 1000 tiles on one core, with per-stage seconds
+    (:func:`_tile_run`), ``repeats`` times each: a synthetic RGB tile of ``size_px`` at
+    ``pixel_m`` (scored against the scene's truth) and, when ``data_dir`` holds it, the
+    Massachusetts crop 10078660_15 rows and columns 250-1250 (1 m, scored against its mask's
+    centre lines at 4 m); then, with ``loaded``, each tile once more with a CPU-bound
+    process on the same core. Figures per tile: each run's, and the fastest run's without
+    the ``_runs`` suffix."""
     import os
+    import subprocess
+    from dataclasses import replace
 
     import shapely
 
-    from gisroads.evaluate import buffer_metrics, match_layers
+    from gisroads.evaluate import match_layers
     from gisroads.geo import GeoRaster
-    from gisroads.imagery.pipeline import extract_image_roads
     from gisroads.io.quicklook import evaluation_layers, write_quicklook
     from gisroads.synthetic import make_scene, render_image
 
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    core = min(os.sched_getaffinity(0)) if hasattr(os, "sched_setaffinity") else None
+    if core is not None:
+        os.sched_setaffinity(0, {core})
     scene = make_scene(seed=0, size_m=(size_px * pixel_m, size_px * pixel_m))
     rendered, _ = render_image(scene, pixel_m=pixel_m)
     image = GeoRaster(rendered.data[:3, :size_px, :size_px], rendered.transform, rendered.crs)
-    (network, qa), seconds = _timed(extract_image_roads, image)
-    (baseline, _), baseline_s = _timed(_image_baseline, image)
-    frame = shapely.box(*image.bounds)
-    result = {"tile_px": size_px, "pixel_m": pixel_m, "cores": 1, "pipeline_s": seconds,
-              **{f"stage_{k}_s": v for k, v in qa.get("timings_s", {}).items()},
-              "baseline_s": baseline_s}
-    for name, roads in (("pipeline", network), ("baseline", baseline)):
-        scores = buffer_metrics(roads.centrelines, scene.truth.centrelines, buffer_m=3.0,
-                                valid_area=frame)
-        result.update({f"{name}_{k}": getattr(scores, k) for k in _SCORES})
-    write_quicklook(out / "imagery_tile.png", evaluation_layers(match_layers(
-        network.centrelines, scene.truth.centrelines, buffer_m=3.0, valid_area=frame)),
-        background=image, title=f"imagery pipeline, {size_px} px synthetic tile: "
-                                f"{seconds:.1f} s on one core")
+    tiles = {"synthetic": dict(image=image, truth=scene.truth.centrelines, buffer_m=3.0,
+                               valid_area=shapely.box(*image.bounds))}
+    if data_dir is not None and (Path(data_dir) / "massachusetts").is_dir():
+        from gisroads.imagery.datasets import load_massachusetts
+
+        record = load_massachusetts(data_dir, stems=["10078660_15"])[0].crop(250, 250,
+                                                                             1000, 1000)
+        # its white fill declared as no-data, as a user gives it to the model
+        # buffer(0): the crop's valid area also holds lines where it touches the window
+        tiles["massachusetts"] = dict(image=replace(record.image, nodata=255),
+                                      truth=record.truth, buffer_m=record.buffer_m,
+                                      valid_area=record.valid_area.buffer(0))
+    result = {"tile_px": size_px, "pixel_m": pixel_m, "cores": 1, "load_average_start":
+              os.getloadavg()[0]}
+    for name, tile in tiles.items():
+        runs = []
+        for _ in range(repeats):
+            entry, network = _tile_run(**tile)
+            runs.append(entry)
+        fastest = min(runs, key=lambda e: e["total_s"])
+        result.update({f"{name}_{k}": v for k, v in fastest.items()})
+        result.update({f"{name}_{k}_runs": [e[k] for e in runs] for k in
+                       ("total_s", "reference_s", "total_over_reference")})
+        frame = tile["valid_area"]
+        write_quicklook(out / f"imagery_tile_{name}.png", evaluation_layers(match_layers(
+            network.centrelines, tile["truth"], buffer_m=tile["buffer_m"],
+            valid_area=frame)), background=tile["image"],
+            title=f"default imagery path, {name} 1000 px tile: "
+                  f"{fastest['total_s']:.1f} s on one core")
+    if loaded and core is not None:
+        # a busy loop on the same core: the run gets about half of it
+        busy = subprocess.Popen([sys.executable, "-c", "import os\n"
+                                 f"os.sched_setaffinity(0, {{{core}}})\nwhile True: pass"])
+        try:
+            for name, tile in tiles.items():
+                entry, _ = _tile_run(**tile)
+                result.update({f"{name}_loaded_{k}": v for k, v in entry.items()
+                               if k.endswith("_s") or k == "total_over_reference"})
+        finally:
+            busy.kill()
+            busy.wait()
+    result["load_average_end"] = os.getloadavg()[0]
     return result
 
 
@@ -807,7 +925,10 @@ def main() -> None:
             "imagery_real": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"
                                              / "data" / "imagery"),
                              "datasets": ["spacenet_vegas", "eth"] if args.quick else None},
-            "imagery_tile": {"size_px": 1000, "pixel_m": 0.3},
+            "imagery_tile": {"size_px": 1000, "pixel_m": 0.3,
+                             "data_dir": str(Path(__file__).resolve().parents[2] / "shared"
+                                             / "data" / "imagery"),
+                             "repeats": 1 if args.quick else 2},
             "vectorize_masks": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"
                                                 / "data" / "imagery")},
             "vectorize_large": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"
