@@ -45,6 +45,15 @@ imagery_real
     seconds, per-stage seconds, quick-looks in OUT/imagery/, the tables in
     OUT/imagery_real.md; also the papers' road-part centre lines alone. ``pipeline_*`` is the
     default path of extract_image_roads.
+imagery_layer_training
+    Training from a road layer (issue 15): on each scored Massachusetts tile and SpaceNet
+    Paris, whole roads making 30 % of the reference length are deleted (seeded; roads are
+    the truth lines chained straight on through their junctions), a model is trained on the
+    rest as ``gisroads train`` does and the image extracted with it (adapted, as
+    ``gisroads image --model``, and not adapted): completeness on the deleted roads,
+    correctness of what is found away from the kept roads, scores on all roads, pixel AUC,
+    beside the default model without a layer; Paris also trained on all its OpenStreetMap
+    lines. Tables in OUT/imagery_layer_training.md, quick-looks in OUT/imagery/.
 imagery_tile
     The default imagery path on 1000 x 1000 tiles on one core, twice each: a synthetic RGB
     tile (0.3 m) and a Massachusetts crop (1 m): per-stage seconds (the probability's steps:
@@ -854,6 +863,232 @@ def case_vectorize_large(out: Path, data_dir: str, size_px: int = 5000) -> dict:
             "network_spurs_under_5m": _short_spurs(network.centrelines.geometry.values, 5.0)}
 
 
+LAYER_DELETE_SHARE = 0.3
+"""Share of the reference roads' length deleted from the layer in ``imagery_layer_training``."""
+
+
+def _road_strokes(lines, *, max_turn_deg: float = 45.0, end_m: float = 10.0) -> np.ndarray:
+    """Road number of each line: lines chained through their junctions along the
+    straightest continuation (a street runs on through its crossings; truth skeletons are
+    cut at every junction).
+
+    At every node the pairs of line ends are joined straightest first, each end once, when
+    the road turns there by at most ``max_turn_deg`` (the direction of an end over its last
+    ``end_m`` metres, at most half the line).
+    """
+    import shapely
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    lines = np.asarray(lines, dtype=object)
+    n = len(lines)
+    length = shapely.length(lines)
+    reach = np.minimum(end_m, length / 2)
+    # end k < n is the start of line k, end n + k its end; headings point into the line
+    tips = np.concatenate([shapely.get_coordinates(shapely.get_point(lines, 0)),
+                           shapely.get_coordinates(shapely.get_point(lines, -1))])
+    inner = np.concatenate([
+        shapely.get_coordinates(shapely.line_interpolate_point(lines, reach)),
+        shapely.get_coordinates(shapely.line_interpolate_point(lines, length - reach))])
+    heading = inner - tips
+    heading /= np.maximum(np.linalg.norm(heading, axis=1, keepdims=True), 1e-12)
+    node = np.unique(np.round(tips / 1e-3).astype(np.int64), axis=0,
+                     return_inverse=True)[1].ravel()
+    owner = np.tile(np.arange(n), 2)
+    a, b = np.nonzero(np.triu(node[:, None] == node[None, :], 1))
+    straight = -np.einsum("ij,ij->i", heading[a], heading[b])  # 1: straight on
+    keep = (owner[a] != owner[b]) & (straight >= np.cos(np.radians(max_turn_deg)))
+    a, b, straight = a[keep], b[keep], straight[keep]
+    used = np.zeros(2 * n, bool)
+    joined = []
+    for k in np.argsort(-straight, kind="stable"):  # greedy over the few end pairs
+        if not (used[a[k]] or used[b[k]]):
+            used[[a[k], b[k]]] = True
+            joined.append((owner[a[k]], owner[b[k]]))
+    pairs = np.array(joined, np.int64).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
+
+
+def _deleted_roads(truth, share: float, seed: int, *, overshoot: float = 0.05) -> np.ndarray:
+    """Lines of a reference layer to delete (bool per line): whole roads
+    (:func:`_road_strokes`) in a seeded random order until ``share`` of the length is
+    deleted, skipping any road that would take the deleted length beyond
+    ``share + overshoot`` (a database misses whole streets, not random pieces of them)."""
+    import shapely
+
+    stroke = _road_strokes(truth.geometry.values)
+    length = np.bincount(stroke, weights=shapely.length(truth.geometry.values))
+    chosen = np.zeros(len(length), bool)
+    for road in np.random.default_rng(seed).permutation(len(length)):
+        done = length[chosen].sum()
+        if done >= share * length.sum():
+            break
+        chosen[road] = done + length[road] <= (share + overshoot) * length.sum()
+    return chosen[stroke]
+
+
+def _layer_scores(record, deleted, lines, probability) -> dict:
+    """An extraction scored against the deleted roads and all roads: completeness of the
+    deleted roads, correctness of what lies away from the kept roads (``new``: what the
+    update adds) against the deleted roads, completeness / correctness / quality against
+    all roads, and the pixel AUC of the probability on the deleted roads (their road
+    pixels against the pixels beyond every road's buffer plus 5 m) and on all roads."""
+    import shapely
+
+    from gisroads.evaluate import buffer_metrics
+    from gisroads.learn.scores import pixel_auc
+
+    truth, geoms = record.truth, record.truth.geometry.values
+    match = dict(buffer_m=record.buffer_m, valid_area=record.valid_area)
+    on_all = buffer_metrics(lines, truth, **match)
+    kept_zone = shapely.buffer(shapely.union_all(geoms[~deleted]), record.buffer_m)
+    new = shapely.difference(shapely.union_all(lines.geometry.values), kept_zone)
+    image, p = record.image, probability.data
+    valid = _burn_shapes([record.valid_area], image)
+    road = (np.asarray(record.truth_mask.data, bool) if record.truth_mask is not None
+            else _burn_shapes(shapely.buffer(geoms, 3.0), image))  # OSM: a 3 m band
+    deleted_road = (road & _burn_shapes(shapely.buffer(geoms[deleted], record.buffer_m), image)
+                    & ~_burn_shapes([kept_zone], image))
+    background = ~_burn_shapes(shapely.buffer(geoms, record.buffer_m + 5.0), image)
+    return {"completeness_deleted": buffer_metrics(lines, truth[deleted], **match).completeness,
+            "correctness_new": buffer_metrics([new], truth[deleted], **match).correctness,
+            "completeness": on_all.completeness, "correctness": on_all.correctness,
+            "quality": on_all.quality,
+            "auc_deleted": pixel_auc(p, deleted_road, valid & (deleted_road | background)),
+            "auc": pixel_auc(p, road, valid)}
+
+
+LAYER_TRAINING = dict(width_field="width_m", road_share="default")
+"""Options of :func:`gisroads.learn.training.train_from_layer`: the widths of the truth
+lines (Massachusetts: their mask's; OpenStreetMap lines take the default 6 m), calibrated
+like the bundled model (``gisroads train`` still passes ``road_share="layer"``)."""
+_LAYER_LOOK = ("massachusetts/10228660_15", 0)
+
+
+def _layer_look(path, record, deleted, lines, title):
+    """Quick-look of a layer-trained extraction: kept and deleted roads, found or missed."""
+    from gisroads.evaluate import match_layers
+    from gisroads.io.quicklook import write_quicklook
+
+    match = match_layers(lines, record.truth[deleted], buffer_m=record.buffer_m,
+                         valid_area=record.valid_area)["eval_reference"]
+    write_quicklook(path, [
+        (record.truth[~deleted], dict(color="cyan", linewidth=1, label="kept (trained on)")),
+        (match[match.status == "TP"], dict(color="orange", linewidth=3, label="deleted, found")),
+        (match[match.status == "FN"], dict(color="red", linewidth=3, label="deleted, missed")),
+        (lines, dict(color="yellow", linewidth=1, label="extracted"))],
+        background=record.image, title=title)
+
+
+LAYER_PATHS = {"layer": "trained on the layer, adapted (gisroads image --model)",
+               "layer_plain": "trained on the layer, not adapted (adapt=False)",
+               "default": "default model, adapted, no layer"}
+"""Extractions of :func:`case_imagery_layer_training`."""
+_LAYER_SCORES = ("completeness_deleted", "correctness_new", "completeness", "correctness",
+                 "quality", "auc_deleted", "auc")
+
+
+def _layer_table(per_run: dict, osm: dict) -> str:
+    """Markdown: per run the deleted roads' completeness of each path, then each path's
+    mean scores per dataset, then the OpenStreetMap-trained Paris run."""
+    lines = ["Completeness of the deleted roads (C del) and correctness of what lies away "
+             "from the kept roads (K new) per run; paths: "
+             + "; ".join(f"`{k}` {v}" for k, v in LAYER_PATHS.items()) + ".", "",
+             "| run | deleted share | " + " | ".join(f"C del {p}" for p in LAYER_PATHS)
+             + " | " + " | ".join(f"K new {p}" for p in LAYER_PATHS) + " | train s | extract s |",
+             "|" + "---|" * (4 + 2 * len(LAYER_PATHS))]
+    for name, e in per_run.items():
+        lines.append(f"| {name} | {e['deleted_share']:.2f} | " + " | ".join(
+            f"{e[f'{p}_{k}']:.3f}" for k in _LAYER_SCORES[:2] for p in LAYER_PATHS)
+            + f" | {e['train_s']:.1f} | {e['extract_s']:.1f} |")
+    lines += ["", "| dataset | path | " + " | ".join(_LAYER_SCORES) + " |",
+              "|" + "---|" * (2 + len(_LAYER_SCORES))]
+    for dataset in dict.fromkeys(e["dataset"] for e in per_run.values()):
+        runs = [e for e in per_run.values() if e["dataset"] == dataset]
+        lines += [f"| {dataset} ({len(runs)} runs) | {p} | " + " | ".join(
+            f"{np.nanmean([e[f'{p}_{k}'] for e in runs]):.3f}" for k in _LAYER_SCORES) + " |"
+            for p in LAYER_PATHS]
+    lines += ["", "Paris trained on all its OpenStreetMap lines (default width), scored "
+              "against them: " + ", ".join(f"{k} {v:.3f}" for k, v in osm.items()) + "."]
+    return "\n".join(lines) + "\n"
+
+
+def case_imagery_layer_training(out: Path, data_dir: str, seeds=(0, 1),
+                                share: float = LAYER_DELETE_SHARE) -> dict:
+    """Training from a road layer (the agency's update case, issue 15): on each scored
+    Massachusetts tile and on SpaceNet Paris, per seed, whole roads making ``share`` of the
+    reference length are deleted (:func:`_deleted_roads`), a model is trained on the rest
+    (:data:`LAYER_TRAINING`, as ``gisroads train``) and the image extracted with it as
+    ``gisroads image --model`` does (``extract_image_roads(image, model=...)``);
+    :func:`_layer_scores` of it and of the default model's extraction (no layer) against the
+    same deleted roads; train and extract seconds. Paris also trained on all its
+    OpenStreetMap lines and scored against them (``osm_*``). Quick-look of one tile in
+    OUT/imagery/, the table in OUT/imagery_layer_training.md."""
+    from dataclasses import replace
+
+    import shapely
+
+    from gisroads.evaluate import buffer_metrics
+    from gisroads.imagery.datasets import benchmark_images
+    from gisroads.imagery.pipeline import extract_image_roads
+    from gisroads.learn.scores import pixel_auc
+    from gisroads.learn.training import train_from_layer
+
+    looks = out / "imagery"
+    looks.mkdir(exist_ok=True)
+    per_run, osm = {}, {}
+    for record in benchmark_images(data_dir, datasets=("massachusetts", "spacenet_paris")):
+        if not record.scored:
+            continue
+        # Massachusetts declares its white fill as no-data, as a user gives it to the model
+        image = (replace(record.image, nodata=255) if record.dataset == "massachusetts"
+                 else record.image)
+        default, default_s = _timed(extract_image_roads, image)
+        for seed in seeds:
+            deleted = _deleted_roads(record.truth, share, seed)
+            model, train_s = _timed(train_from_layer, image, record.truth[~deleted],
+                                    seed=seed, **LAYER_TRAINING)
+            runs = {"default": default}
+            runs["layer"], extract_s = _timed(extract_image_roads, image, model=model)
+            runs["layer_plain"] = extract_image_roads(image, model=model, adapt=False)
+            entry = {"dataset": record.dataset, "train_s": train_s, "extract_s": extract_s,
+                     "default_s": default_s, "deleted_share": float(
+                         record.truth.length[deleted].sum() / record.truth.length.sum())}
+            for path, run in runs.items():
+                entry.update({f"{path}_{k}": v for k, v in _layer_scores(
+                    record, deleted, run.network.centrelines,
+                    run.report["probability"]).items()})
+            per_run[f"{record.name} seed {seed}"] = entry
+            print(record.name, seed, " ".join(f"{k} {v:.3f}" for k, v in entry.items()
+                                              if not isinstance(v, str)), flush=True)
+            if (record.name, seed) == _LAYER_LOOK:
+                for path in ("layer", "default"):
+                    _layer_look(looks / f"{record.name.replace('/', '_')}_{path}.png", record,
+                                deleted, runs[path].network.centrelines,
+                                f"{record.name} {path}: completeness of the deleted roads "
+                                f"{entry[f'{path}_completeness_deleted']:.2f}")
+        if record.dataset == "spacenet_paris":
+            model, osm["train_s"] = _timed(train_from_layer, image, record.truth, seed=seeds[0],
+                                           **LAYER_TRAINING)
+            roads, osm["extract_s"] = _timed(extract_image_roads, image, model=model)
+            plain = extract_image_roads(image, model=model, adapt=False)
+            valid = _burn_shapes([record.valid_area], image)
+            band = _burn_shapes(shapely.buffer(record.truth.geometry.values, 3.0), image)
+            for name, run in (("osm", roads), ("osm_plain", plain), ("default", default)):
+                scores = buffer_metrics(run.network.centrelines, record.truth,
+                                        buffer_m=record.buffer_m, valid_area=record.valid_area)
+                osm.update({f"{name}_{k}": getattr(scores, k) for k in _SCORES})
+                osm[f"{name}_auc"] = pixel_auc(run.report["probability"].data, band, valid)
+    tiles = [e for e in per_run.values() if e["dataset"] == "massachusetts"]
+    result = {f"massachusetts_mean_{k}": float(np.nanmean([e[k] for e in tiles]))
+              for k in tiles[0] if not isinstance(tiles[0][k], str)}
+    result.update({f"paris_{k}": v for k, v in osm.items()})
+    table = _layer_table(per_run, osm)
+    (out / "imagery_layer_training.md").write_text(table)
+    return {**result, "per_image": per_run, "table": table}
+
+
 def case_road_database_update(out: Path, seeds: int) -> dict:
     """Change classes found against edited truths (bench/road_database_update.py): recall
     and precision per source (truth, synthetic LiDAR and imagery, fusa) and class."""
@@ -879,7 +1114,9 @@ CASES = {"synth_cloud": case_synth_cloud, "evaluate": case_evaluate,
          "snakes_registration": case_snakes_registration,
          "snakes": case_snakes,
          "lidar_real": case_lidar_real, "imagery_real": case_imagery_real,
-         "imagery_tile": case_imagery_tile, "vectorize_masks": case_vectorize_masks,
+         "imagery_tile": case_imagery_tile,
+         "imagery_layer_training": case_imagery_layer_training,
+         "vectorize_masks": case_vectorize_masks,
          "vectorize_large": case_vectorize_large,
          "road_database_update": case_road_database_update, "city": case_city}
 
@@ -931,6 +1168,9 @@ def main() -> None:
                              "data_dir": str(Path(__file__).resolve().parents[2] / "shared"
                                              / "data" / "imagery"),
                              "repeats": 1 if args.quick else 2},
+            "imagery_layer_training": {"data_dir": str(Path(__file__).resolve().parents[2]
+                                                       / "shared" / "data" / "imagery"),
+                                       "seeds": [0] if args.quick else [0, 1]},
             "vectorize_masks": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"
                                                 / "data" / "imagery")},
             "vectorize_large": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"
