@@ -76,9 +76,11 @@ TRIED = """
   SpaceNet Paris, 3 of its 10 OpenStreetMap lines deleted: AUC 0.744 on their 3 m band.
 - Structurally different options for the cross-sensor gap (issue 15), each retrained by this
   script's sampling and parameters and measured as the bench's default path (adapted,
-  network stage at 0.4) on the 13 images; this model there: quality 0.270, AUC 0.799,
+  network stage at 0.4) on the 13 images; the model they were compared with (42 features,
+  24 m lines only, the default before the 48 m lines) there: quality 0.270, AUC 0.799,
   per dataset Vegas / Paris / Massachusetts / DeepGlobe / ETH 0.071 / 0.267 / 0.276 /
-  0.072 / 0.384 (naive baseline 0.045 / 0.105 / 0.273 / 0.114 / 0.287). None kept:
+  0.072 / 0.384 (naive baseline 0.045 / 0.105 / 0.273 / 0.114 / 0.287). Kept: only the
+  48 m lines (the last item):
   - every feature standardised per image (median and interquartile range over up to nine
     256-pixel windows of the image, the same on each training copy): quality 0.224, AUC
     0.692; 0.092 / 0.317 / 0.060 / 0.014 / 0.448. In-domain images gain (ETH 0.384 ->
@@ -107,17 +109,32 @@ TRIED = """
     (a desert village) has no grey surface, so the model is not adapted there and finds
     none of its streets at 0.4.
   - oriented line means over 48 m as well as 24 m (the same eight directions and side
-    offsets, 49 features): quality 0.293 / 0.294 at seeds 0 / 1 against 0.270 / 0.256,
-    AUC 0.805 / 0.814; 0.116 / 0.274 / 0.274 / 0.038 / 0.449 and 0.106 / 0.262 / 0.281 /
-    0.029 / 0.456 (at 0.3 / 0.5: 0.283 / 0.295 and 0.292 / 0.290). The one option that
-    gains beyond the seed noise at both seeds, Massachusetts at or above its baseline at
-    both, ETH 001 / 007 0.54 -> 0.68 / 0.27 -> 0.41 (a narrow street found); but
-    DeepGlobe further under its baseline (343: 0.08 / 0.06), and the dense 80-pixel line
-    kernels make the features 4 times slower (512 x 512 at 0.6 m: 1.1 s against 0.27 s,
-    one run on the shared machine).
-    Not kept for lack of time to retrain and score it here; the next step is these long
-    lines on a 1.2 m grid (or as sparse shifted sums) to keep the feature time, then this
-    script and the bench.
+    offsets, 49 features), first as dense 80-pixel line kernels: quality 0.293 / 0.294 at
+    seeds 0 / 1 against 0.270 / 0.256, AUC 0.805 / 0.814, but the features 4.4 times
+    slower than with 24 m lines alone. Built by doubling instead (`features._line_means`:
+    a 4-8 pixel segment doubled with one shifted copy per step, 24 m and 48 m from the same
+    chain; this model), the features take 0.70 of the time of the 24 m lines alone
+    (512 x 512 at 0.6 m, best of 3, same run: 0.202 s against 0.289 s; the dense kernels
+    1.283 s). Same 13 images and scoring, against the 42-feature model's 0.270 / 0.270 /
+    0.257 at 0.3 / 0.4 / 0.5 (AUC 0.799) in the same session: seed 0 (this model) 0.294 /
+    0.297 / 0.284, AUC 0.803, at 0.4 Vegas / Paris / Massachusetts / DeepGlobe / ETH
+    0.094 / 0.286 / 0.290 / 0.021 / 0.457; seed 1 0.287 / 0.279 / 0.286, AUC 0.807,
+    0.084 / 0.208 / 0.285 / 0.035 / 0.426. Gains beyond the seed noise at both seeds,
+    Massachusetts above its baseline at 0.4 and 0.5 at both (0.4 kept: the thresholds
+    are within the noise of each other, two seeds' means 0.291 / 0.288 / 0.285);
+    DeepGlobe further under its baseline (343 keeps its one found road but gains field
+    margins). A first version that centred the lines by reading their start past the
+    image border (a line there reached its whole length inward, beyond a tile's halo:
+    tiles differed from the whole image by up to 0.45 in `line_mean_along_48m`) gave
+    0.279 / 0.282 at 0.4 and 0.285 / 0.288 at 0.5.
+  - with that first version (seed 0, against its 0.279 / 0.285 at 0.4 / 0.5): lines over
+    96 m as well (57 features): quality 0.281 / 0.284, AUC 0.822, DeepGlobe 0.013. Over 12 m as well: 0.282 / 0.278, AUC 0.811, Paris 0.169.
+    Neither beyond the seed noise; not kept.
+  - self-adaptation (same first version, seed 0) with non-road samples also from the grey
+    pixels (the colour cue) outside the model's top 20 % (teaching the image's model that
+    grey alone is not road): 0.271 / 0.270, AUC 0.808; DeepGlobe 0.055 / 0.062, Massachusetts 0.289 / 0.280,
+    but ETH 0.375 / 0.381 (its grey roads under trees and shadows become non-road). Not
+    kept.
 """
 MIN_LINE_M = 10.0
 """Skeleton lines shorter than this are dropped before the buffer scores, metres."""
@@ -249,6 +266,7 @@ def _layer_table(rows: list[dict]) -> str:
 def write_card(path: Path, model, rows_plain, rows_adapted, train_seconds: float,
                rows_layer) -> None:
     meta = model.metadata
+    line_lengths = " and ".join(f"{length:g}" for length in ft.LINE_LENGTHS_M)
     text = f"""# Default road model (`default_road_model.npz`)
 
 Written by `scripts/train_road_model.py` (seed {meta['parameters']['seed']}); load with
@@ -273,9 +291,10 @@ intensity relative to the image's median, Gaussian smoothing, gradient magnitude
 eigenvalues and local standard deviation at {list(ft.SCALES_M)} m; saturation,
 chromaticity and excess green of the recorded bands at {list(ft.COLOUR_SCALES_M)} m;
 contrast to a {ft.CONTEXT_M:g} m box mean; the intensity itself; oriented line means over
-{ft.LINE_M:g} m in {ft.ORIENTATIONS} directions (homogeneity along the line, contrast to
-parallel lines {list(ft.LINE_OFFSETS_M)} m to either side). Images finer than 0.45 m are
-block-averaged to about {ft.WORK_PIXEL_M} m first.
+{line_lengths} m in {ft.ORIENTATIONS} directions (homogeneity along the line, contrast to
+parallel lines {list(ft.LINE_OFFSETS_M)} m to either side; each longer line built by
+doubling the shorter one). Images finer than 0.45 m are block-averaged to about
+{ft.WORK_PIXEL_M} m first.
 
 ## Classifier
 scikit-learn `HistGradientBoostingClassifier` ({meta['sklearn']}), {json.dumps(meta['parameters'])},

@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 from affine import Affine
+from scipy import ndimage
 
 from gisroads.geo import GeoRaster
 from gisroads.learn import features as ft
@@ -36,13 +37,41 @@ def test_feature_names_match_the_computed_stack():
     assert values.dtype == np.float32 and valid.all() and np.isfinite(values).all()
 
 
-def test_features_are_measured_in_metres():
-    fine, coarse = _centre_features(_stripe(0.5)), _centre_features(_stripe(1.0))
-    for name in ("smooth_2m", "ridge_4m", "valley_4m", "stddev_8m", "line_dark_10m",
-                 "line_std_max", "contrast"):
+@pytest.mark.parametrize("fine_m", [0.3, 0.5])
+def test_features_are_measured_in_metres(fine_m):
+    fine, coarse = _centre_features(_stripe(fine_m)), _centre_features(_stripe(1.0))
+    for name in ("smooth_2m", "ridge_4m", "valley_4m", "stddev_8m", "contrast",
+                 *(n for n in ft.feature_names() if n.startswith("line_"))):
         assert fine[name] == pytest.approx(coarse[name], rel=0.15, abs=0.1), name
-    # the dark road is a valley-free ridge of the intensity at its own scale
-    assert fine["ridge_4m"] > 0.5 and fine["line_dark_10m"] < -1.0
+    # the dark road is a valley-free ridge of the intensity at its own scale, darker than
+    # the parallel lines beside it over 24 and 48 m
+    assert fine["ridge_4m"] > 0.5
+    assert fine["line_dark_10m_24m"] < -1.0 and fine["line_dark_10m_48m"] < -1.0
+
+
+@pytest.mark.parametrize("pixel_m", [0.6, 1.0])
+def test_doubled_lines_are_running_means_along_the_line(pixel_m):
+    """The lines built by doubling equal a plain running mean of their length along a row,
+    and the northward lines the eastward ones of the image turned a quarter, away from
+    the edges."""
+    z = np.random.default_rng(1).standard_normal((170, 170)).astype(np.float32)
+    reach = int(max(ft.LINE_LENGTHS_M) / pixel_m)
+    core = (slice(reach, -reach), slice(reach, -reach))
+    east = ft._line_means(z, pixel_m, 0.0)
+    north = ft._line_means(np.rot90(z, 1), pixel_m, np.pi / 2)
+    for length_m, (mean, square), (turned, _) in zip(ft.LINE_LENGTHS_M, east, north):
+        size = int(round(length_m / pixel_m))
+        np.testing.assert_allclose(mean[core], ndimage.uniform_filter1d(z, size)[core],
+                                   atol=1e-5)
+        np.testing.assert_allclose(square[core],
+                                   ndimage.uniform_filter1d(z * z, size)[core], atol=1e-5)
+        np.testing.assert_allclose(np.rot90(turned, -1)[core], mean[core], atol=1e-5)
+
+
+def test_bundled_model_uses_these_features():
+    from gisroads.learn.model import load_model
+
+    assert load_model().feature_names == ft.feature_names()
 
 
 def test_fine_images_are_read_on_a_coarser_work_grid():
