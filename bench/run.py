@@ -49,8 +49,9 @@ imagery_layer_training
     Training from a road layer (issue 15): on each scored Massachusetts tile and SpaceNet
     Paris, whole roads making 30 % of the reference length are deleted (seeded; roads are
     the truth lines chained straight on through their junctions), a model is trained on the
-    rest as ``gisroads train`` does and the image extracted with it (adapted, as
-    ``gisroads image --model``, and not adapted): completeness on the deleted roads,
+    rest (calibrated like the bundled model) and the image extracted with it (adapted, as
+    ``gisroads image --model``, and not adapted; also trained with the unmapped-road pass,
+    not adapted): completeness on the deleted roads,
     correctness of what is found away from the kept roads, scores on all roads, pixel AUC,
     beside the default model without a layer; Paris also trained on all its OpenStreetMap
     lines. Tables in OUT/imagery_layer_training.md, quick-looks in OUT/imagery/.
@@ -983,6 +984,8 @@ def _layer_look(path, record, deleted, lines, title):
 
 LAYER_PATHS = {"layer": "trained on the layer, adapted (gisroads image --model)",
                "layer_plain": "trained on the layer, not adapted (adapt=False)",
+               "layer_unmapped_plain": "trained on the layer with unmapped_probability "
+                                       "0.4, not adapted",
                "default": "default model, adapted, no layer"}
 """Extractions of :func:`case_imagery_layer_training`."""
 _LAYER_SCORES = ("completeness_deleted", "correctness_new", "completeness", "correctness",
@@ -1019,12 +1022,13 @@ def case_imagery_layer_training(out: Path, data_dir: str, seeds=(0, 1),
     """Training from a road layer (the agency's update case, issue 15): on each scored
     Massachusetts tile and on SpaceNet Paris, per seed, whole roads making ``share`` of the
     reference length are deleted (:func:`_deleted_roads`), a model is trained on the rest
-    (:data:`LAYER_TRAINING`, as ``gisroads train``) and the image extracted with it as
-    ``gisroads image --model`` does (``extract_image_roads(image, model=...)``);
-    :func:`_layer_scores` of it and of the default model's extraction (no layer) against the
-    same deleted roads; train and extract seconds. Paris also trained on all its
-    OpenStreetMap lines and scored against them (``osm_*``). Quick-look of one tile in
-    OUT/imagery/, the table in OUT/imagery_layer_training.md."""
+    (:data:`LAYER_TRAINING`) and the image extracted with it as ``gisroads image --model``
+    does (``extract_image_roads(image, model=...)``, adapted) and not adapted, and with a
+    model trained with ``unmapped_probability=0.4``, not adapted (:data:`LAYER_PATHS`);
+    :func:`_layer_scores` of each and of the default model's extraction (no layer) against
+    the same deleted roads; seconds of the first training and its adapted extraction. Paris
+    also trained on all its OpenStreetMap lines and scored against them (``osm_*``).
+    Quick-looks of one tile in OUT/imagery/, the tables in OUT/imagery_layer_training.md."""
     from dataclasses import replace
 
     import shapely
@@ -1052,6 +1056,10 @@ def case_imagery_layer_training(out: Path, data_dir: str, seeds=(0, 1),
             runs = {"default": default}
             runs["layer"], extract_s = _timed(extract_image_roads, image, model=model)
             runs["layer_plain"] = extract_image_roads(image, model=model, adapt=False)
+            unmapped = train_from_layer(image, record.truth[~deleted], seed=seed,
+                                        unmapped_probability=0.4, **LAYER_TRAINING)
+            runs["layer_unmapped_plain"] = extract_image_roads(image, model=unmapped,
+                                                               adapt=False)
             entry = {"dataset": record.dataset, "train_s": train_s, "extract_s": extract_s,
                      "default_s": default_s, "deleted_share": float(
                          record.truth.length[deleted].sum() / record.truth.length.sum())}
@@ -1073,9 +1081,13 @@ def case_imagery_layer_training(out: Path, data_dir: str, seeds=(0, 1),
                                            **LAYER_TRAINING)
             roads, osm["extract_s"] = _timed(extract_image_roads, image, model=model)
             plain = extract_image_roads(image, model=model, adapt=False)
+            unmapped = extract_image_roads(image, adapt=False, model=train_from_layer(
+                image, record.truth, seed=seeds[0], unmapped_probability=0.4,
+                **LAYER_TRAINING))
             valid = _burn_shapes([record.valid_area], image)
             band = _burn_shapes(shapely.buffer(record.truth.geometry.values, 3.0), image)
-            for name, run in (("osm", roads), ("osm_plain", plain), ("default", default)):
+            for name, run in (("osm", roads), ("osm_plain", plain),
+                              ("osm_unmapped_plain", unmapped), ("default", default)):
                 scores = buffer_metrics(run.network.centrelines, record.truth,
                                         buffer_m=record.buffer_m, valid_area=record.valid_area)
                 osm.update({f"{name}_{k}": getattr(scores, k) for k in _SCORES})
