@@ -975,7 +975,7 @@ def _layer_look(path, record, deleted, lines, title):
     match = match_layers(lines, record.truth[deleted], buffer_m=record.buffer_m,
                          valid_area=record.valid_area)["eval_reference"]
     write_quicklook(path, [
-        (record.truth[~deleted], dict(color="cyan", linewidth=1, label="kept (trained on)")),
+        (record.truth[~deleted], dict(color="cyan", linewidth=1, label="kept (the layer)")),
         (match[match.status == "TP"], dict(color="orange", linewidth=3, label="deleted, found")),
         (match[match.status == "FN"], dict(color="red", linewidth=3, label="deleted, missed")),
         (lines, dict(color="yellow", linewidth=1, label="extracted"))],
