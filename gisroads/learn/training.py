@@ -413,7 +413,7 @@ def fit_to_image(grid: WorkGrid, probability: np.ndarray, model: RoadModel, *,
                  positive_share: float = 0.08, negative_share: float = 0.5,
                  road_shaped: bool = True, road_like: np.ndarray | None = None,
                  samples: int = 40_000, seed: int = 0, tile_px: int = 512,
-                 max_iter: int = 60, **fit_params) -> RoadModel | None:
+                 max_iter: int = 30, **fit_params) -> RoadModel | None:
     """An image's own model, fitted to the most confident pixels of ``model``.
 
     The ``positive_share`` of the image's valid pixels with the highest probability
@@ -452,12 +452,13 @@ def fit_to_image(grid: WorkGrid, probability: np.ndarray, model: RoadModel, *,
     samples : int
         Samples drawn, half road.
     max_iter : int
-        Trees of the image's own model. 30 was measured too (issue 15, the 13 benchmark
-        images through the default path at 0.4): mean quality 0.272 against 0.270, mean
-        held-out pixel AUC 0.809 against 0.799 (Paris 0.219 against 0.267, DeepGlobe
-        0.103 against 0.072, the other datasets within 0.01), and 0.6 s less on a
-        1000 x 1000 tile at 1 m (2.7 against 3.3 s, one core); kept at 60 while the
-        imagery figures are those measured with it.
+        Trees of the image's own model. 30 rather than 60 (issue 15, the 13 benchmark
+        images through the default path at 0.4, 49-feature bundled model of 4731bb6): mean
+        quality 0.298 against 0.297 (Paris 0.259 / 0.286, DeepGlobe 0.037 / 0.021,
+        Massachusetts 0.298 / 0.290, ETH 0.451 / 0.457, Vegas 0.091 / 0.094: within the
+        noise of single images), mean held-out pixel AUC 0.810 against 0.803, and the fit
+        and the adapted prediction half as long (with the 42-feature model: 0.272 against
+        0.270, 2.7 against 3.3 s on a 1000 x 1000 tile at 1 m on one core).
     seed, tile_px, **fit_params
         Of the sampling and :func:`~gisroads.learn.model.fit_model`.
 
@@ -490,7 +491,7 @@ def fit_to_image(grid: WorkGrid, probability: np.ndarray, model: RoadModel, *,
 
 ADAPT_CACHE_MB = 256.0
 """Feature cache of the adaptation, megabytes (:class:`~gisroads.learn.model.WorkGrid`
-``cache_mb``): with 42 float32 features, a work grid of up to 1.6 million pixels (a 1000 x
+``cache_mb``): with 49 float32 features, a work grid of up to 1.37 million pixels (a 1000 x
 1000 image at 1 m, 2000 x 2000 at 0.3 m, read at 0.6 m) has its features computed once,
 not once for the model's probability, once for the samples and once for the adapted
 probability; on a larger image the tiles past the budget are computed again, so memory

@@ -12,7 +12,7 @@ from gisroads.learn.training import adapt_to_image, adapted_probability
 pytest.importorskip("sklearn")
 
 ADAPT = dict(samples=6000, max_iter=20)
-"""A small adaptation (the defaults fit 40 000 samples with 60 trees)."""
+"""A small adaptation (the defaults fit 40 000 samples with 30 trees)."""
 
 
 @pytest.fixture()
