@@ -87,8 +87,9 @@ def train_job(image_path, roads_path, out_path, *, width_field: str | None = Non
     road_centrelines) are
     rasterised at their width (``width_field``, metres; empty or missing values and layers
     without the field take ``width_m``): positives in the core half of each road, negatives
-    beyond ``width / 2 + guard_m`` (misregistered lines), calibrated to the image's road
-    share (:func:`gisroads.learn.train_from_layer`). Writes the model archive ``out_path``
+    beyond ``width / 2 + guard_m`` (misregistered lines), calibrated to the bundled model's
+    road share (:func:`gisroads.learn.train_from_layer` ``road_share="default"``), so that
+    the extraction's threshold means the same for both models. Writes the model archive ``out_path``
     (.npz), to give to ``image_job(..., model=out_path)``. Needs scikit-learn.
     """
     image, _ = read_image(image_path, pixel_m=pixel_m, crs=crs)
@@ -108,7 +109,7 @@ def train_job(image_path, roads_path, out_path, *, width_field: str | None = Non
                          "python3-sklearn package)") from None
     report(progress, 0.0, "sampling the image along the roads")
     model = train_from_layer(image, roads, width_field=width_field, default_width_m=width_m,
-                             guard_m=guard_m, samples=samples, seed=seed, road_share="layer",
+                             guard_m=guard_m, samples=samples, seed=seed, road_share="default",
                              progress=scaled(progress, 0.05, 0.95))
     model = with_metadata(model, image=Path(image_path).name, width_field=width_field,
                           roads=(Path(roads_path).name if not isinstance(
