@@ -7,7 +7,7 @@ import pytest
 
 from gisroads.learn import features as ft
 from gisroads.learn import model as rm
-from gisroads.learn.training import adapt_to_image, adapted_probability
+from gisroads.learn.training import adapt_to_image, adapted_probability, fit_to_image
 
 pytest.importorskip("sklearn")
 
@@ -70,7 +70,7 @@ def test_adapted_probability_equals_the_adapted_model_predicted(holed_image, sce
     model and where it keeps the model as it is."""
     image = holed_image
     tiles = len(list(rm.WorkGrid(image).tiles(128)))
-    fast = adapted_probability(image, scene_model, tile_px=128, **ADAPT).data
+    fast = adapted_probability(image, scene_model, tile_px=128, weight=0.75, **ADAPT).data
     assert len(feature_calls) == tiles  # once per tile, not three times
     adapted = adapt_to_image(image, scene_model, tile_px=128, **ADAPT)
     assert adapted.n_trees == scene_model.n_trees + ADAPT["max_iter"]
@@ -82,6 +82,42 @@ def test_adapted_probability_equals_the_adapted_model_predicted(holed_image, sce
     np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-6)
     assert np.nanmax(np.abs(fast - plain)) > 0.1  # the adaptation changed the probability
     # no road-like pixel: no adaptation, the model's own probability
+    kept = adapted_probability(image, scene_model, tile_px=128, weight=0.75,
+                               road_like=np.zeros(image.shape, bool), **ADAPT).data
+    np.testing.assert_allclose(kept, plain, rtol=0, atol=1e-6)
+
+
+def test_default_adaptation_is_the_own_model_fitted_on_samples_chosen_every_second_pixel(
+        holed_image, scene_model, feature_calls, monkeypatch):
+    """Weight 1 (the default): the image's own model alone, its samples chosen from the
+    bundled model's log-odds on every second pixel, which the bundled model's trees see
+    alone; features once per tile; without an own model, the bundled model's probability
+    at every pixel."""
+    image = holed_image
+    tiles = len(list(rm.WorkGrid(image).tiles(128)))
+    predicted = []
+    decision = rm.RoadModel.decision
+
+    def counted(model, X):
+        predicted.append((model.n_trees, X.shape[1]))
+        return decision(model, X)
+
+    monkeypatch.setattr(rm.RoadModel, "decision", counted)
+    fast = adapted_probability(image, scene_model, tile_px=128, **ADAPT).data
+    assert len(feature_calls) == tiles
+    grid = rm.WorkGrid(image)
+    valid = sum(grid.features(*t)[1].sum() for t in grid.tiles(128))
+    bundled = sum(n for trees, n in predicted if trees == scene_model.n_trees)
+    own = sum(n for trees, n in predicted if trees == ADAPT["max_iter"])
+    assert bundled == pytest.approx(valid / 4, rel=0.05)  # every second row and column
+    assert own == valid  # the own model predicts every pixel
+    # the own model's probability: refitted on the same samples, predicted from scratch
+    selection = rm.sigmoid(rm.work_decision(grid, scene_model, tile_px=128, stride=2))
+    refit = fit_to_image(grid, selection.astype(np.float32), scene_model, tile_px=128, **ADAPT)
+    slow = rm.predict_probability(image, refit, tile_px=128).data
+    np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-6)
+    plain = rm.predict_probability(image, scene_model, tile_px=128).data
+    assert np.nanmax(np.abs(fast - plain)) > 0.1
     kept = adapted_probability(image, scene_model, tile_px=128,
                                road_like=np.zeros(image.shape, bool), **ADAPT).data
     np.testing.assert_allclose(kept, plain, rtol=0, atol=1e-6)
