@@ -536,14 +536,22 @@ mean held-out pixel AUC 0.815 against 0.810; per dataset Vegas 0.101 / 0.091, Pa
 0.230 / 0.259, Massachusetts 0.302 / 0.298, DeepGlobe 0.030 / 0.037, ETH 0.453 / 0.451,
 within what single images move between runs. The bundled model's trees then run on a
 quarter of the pixels (:data:`SELECTION_STRIDE`): the 1000 x 1000 Massachusetts tile at 1 m
-in 1.8-1.9 s against 2.7-3.2 s in the same process."""
+in 1.8-1.9 s against 2.7-3.2 s in the same process. A model trained on the image's own
+road layer (:func:`train_from_layer`) has no domain to leave behind and keeps its share
+(:data:`LAYER_MODEL_WEIGHT`)."""
+LAYER_MODEL_WEIGHT = 0.75
+"""Log-odds weight of the image's own model when the model given was trained on the
+image's road layer: its extraction keeps 0.25 of that model's log-odds. With the own model
+alone, the CLI test's synthetic scene, trained on its whole layer, loses correctness (0.76
+against 0.80 or more), and so does SpaceNet Paris trained on its OpenStreetMap lines
+(completeness 0.285 against 0.377, bench ``imagery_layer_training``)."""
 SELECTION_STRIDE = 2
 """With :data:`ADAPT_WEIGHT` 1, the bundled model predicts every second pixel of the work
 grid's rows and columns to choose the adaptation's samples (a road of 3 m and more at the
 0.6-1 m work grid spans several such pixels)."""
 
 
-def adapted_probability(image: GeoRaster, model: RoadModel, *, weight: float = ADAPT_WEIGHT,
+def adapted_probability(image: GeoRaster, model: RoadModel, *, weight: float | None = None,
                         selection_stride: int = SELECTION_STRIDE, tile_px: int = 512,
                         progress: Progress = None, **options) -> GeoRaster:
     """The road probability of the model adapted to the image, the default path's
@@ -563,8 +571,9 @@ def adapted_probability(image: GeoRaster, model: RoadModel, *, weight: float = A
     ----------
     image : GeoRaster
     model : RoadModel
-    weight : float
-        Log-odds weight of the image's own model, in [0, 1] (:data:`ADAPT_WEIGHT`).
+    weight : float, optional
+        Log-odds weight of the image's own model, in [0, 1]. Default: :data:`ADAPT_WEIGHT`,
+        or :data:`LAYER_MODEL_WEIGHT` for a model trained on a road layer.
     selection_stride : int
         With ``weight`` 1, pixels between those ``model`` predicts to choose the samples.
     tile_px, **options
@@ -577,6 +586,9 @@ def adapted_probability(image: GeoRaster, model: RoadModel, *, weight: float = A
     GeoRaster
         As :func:`~gisroads.learn.model.predict_probability`.
     """
+    if weight is None:
+        weight = (LAYER_MODEL_WEIGHT if model.metadata.get("trained_on") == "road layer"
+                  else ADAPT_WEIGHT)
     if not 0 <= weight <= 1:
         raise ValueError(f"weight must be in [0, 1], not {weight}")
     grid = WorkGrid(image, cache_mb=ADAPT_CACHE_MB)

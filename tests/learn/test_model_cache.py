@@ -70,7 +70,8 @@ def test_adapted_probability_equals_the_adapted_model_predicted(holed_image, sce
     model and where it keeps the model as it is."""
     image = holed_image
     tiles = len(list(rm.WorkGrid(image).tiles(128)))
-    fast = adapted_probability(image, scene_model, tile_px=128, weight=0.75, **ADAPT).data
+    # a model trained on a road layer keeps its share by default (LAYER_MODEL_WEIGHT 0.75)
+    fast = adapted_probability(image, scene_model, tile_px=128, **ADAPT).data
     assert len(feature_calls) == tiles  # once per tile, not three times
     adapted = adapt_to_image(image, scene_model, tile_px=128, **ADAPT)
     assert adapted.n_trees == scene_model.n_trees + ADAPT["max_iter"]
@@ -89,7 +90,7 @@ def test_adapted_probability_equals_the_adapted_model_predicted(holed_image, sce
 
 def test_default_adaptation_is_the_own_model_fitted_on_samples_chosen_every_second_pixel(
         holed_image, scene_model, feature_calls, monkeypatch):
-    """Weight 1 (the default): the image's own model alone, its samples chosen from the
+    """Weight 1 (the default for the bundled model): the image's own model alone, its samples chosen from the
     bundled model's log-odds on every second pixel, which the bundled model's trees see
     alone; features once per tile; without an own model, the bundled model's probability
     at every pixel."""
@@ -103,7 +104,7 @@ def test_default_adaptation_is_the_own_model_fitted_on_samples_chosen_every_seco
         return decision(model, X)
 
     monkeypatch.setattr(rm.RoadModel, "decision", counted)
-    fast = adapted_probability(image, scene_model, tile_px=128, **ADAPT).data
+    fast = adapted_probability(image, scene_model, tile_px=128, weight=1.0, **ADAPT).data
     assert len(feature_calls) == tiles
     grid = rm.WorkGrid(image)
     valid = sum(grid.features(*t)[1].sum() for t in grid.tiles(128))
@@ -118,6 +119,6 @@ def test_default_adaptation_is_the_own_model_fitted_on_samples_chosen_every_seco
     np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-6)
     plain = rm.predict_probability(image, scene_model, tile_px=128).data
     assert np.nanmax(np.abs(fast - plain)) > 0.1
-    kept = adapted_probability(image, scene_model, tile_px=128,
+    kept = adapted_probability(image, scene_model, tile_px=128, weight=1.0,
                                road_like=np.zeros(image.shape, bool), **ADAPT).data
     np.testing.assert_allclose(kept, plain, rtol=0, atol=1e-6)
