@@ -64,12 +64,14 @@ PROBABILITY_THRESHOLD = 0.4
 0.279 / 0.286: the thresholds are within the training's seed noise (about 0.015) of each
 other. At 0.4 and 0.5 Massachusetts is above its naive baseline at both seeds (0.290 and
 0.285 at 0.4 against 0.273), at 0.3 not at seed 1 (0.271). Not adapted: 0.189 / 0.193 /
-0.168. The 42-feature model before it (24 m lines only): 0.270 / 0.270 / 0.257."""
+0.168. The 42-feature model before it (24 m lines only): 0.270 / 0.270 / 0.257. With the
+image's own model alone (the default since), 0.297 / 0.297 / 0.296."""
 DEFAULT_METHOD = PROBABILITY_METHOD
 """The path :func:`extract_image_roads` takes when given a model and no ``method``: the
 probability alone through the network stage, mean quality 0.297 on the 13 benchmark images
-against 0.183 for the papers' pipeline without a model, 0.182 with the probability in its
-stages and 0.224 for the naive baseline (one ``imagery_real`` run, the 49-feature model)."""
+against 0.183 for the papers' pipeline without a model, 0.202 with the probability in its
+stages and 0.224 for the naive baseline (one ``imagery_real`` run, the 49-feature model,
+the image's own model alone: ``learn.training.ADAPT_WEIGHT``)."""
 
 
 TILE_PX = 1000
