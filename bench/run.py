@@ -302,6 +302,7 @@ def _image_baseline(image):
 
 
 _SCORES = ("completeness", "correctness", "quality")
+_AUCS = ("auc", "auc_adapted", "auc_context")
 
 
 def _imagery_table(per_image: dict, methods, default_path: str) -> str:
@@ -309,13 +310,14 @@ def _imagery_table(per_image: dict, methods, default_path: str) -> str:
     correctness / quality and seconds, and the default model's held-out pixel AUC."""
     scored = {name: e for name, e in per_image.items() if e["scored"]}
     lines = ["Quality per image (C / K / Q in the second table); AUC = held-out pixel AUC of "
-             "the default model, plain / adapted.", "",
-             "| image | AUC | AUC adapted | " + " | ".join(methods) + " |",
-             "|" + "---|" * (3 + len(methods))]
+             "the default model, plain / adapted / adapted and re-scored by the context "
+             "model.", "",
+             "| image | AUC | AUC adapted | AUC context | " + " | ".join(methods) + " |",
+             "|" + "---|" * (4 + len(methods))]
 
     def row(label, entries):
         cells = [f"{np.nanmean([e.get(k, np.nan) for e in entries]):.3f}"
-                 for k in ("auc", "auc_adapted")]
+                 for k in _AUCS]
         cells += [f"{np.nanmean([e.get(f'{m}_quality', np.nan) for e in entries]):.3f}"
                   for m in methods]
         return f"| {label} | " + " | ".join(cells) + " |"
@@ -353,12 +355,13 @@ def _imagery_table(per_image: dict, methods, default_path: str) -> str:
 
 
 IMAGERY_PATHS = ("baseline", "papers", "papers_model", "prob_0.3", "prob_0.4", "prob_0.5",
-                 "prob_adapted_0.3", "prob_adapted_0.4", "prob_adapted_0.5")
+                 "prob_adapted_0.3", "prob_adapted_0.4", "prob_adapted_0.5",
+                 "prob_context_0.3", "prob_context_0.4", "prob_context_0.5")
 """Paths of :func:`case_imagery_real`: the naive baseline, the papers' pipeline without a
 model, with the adapted default model's probability (road-part criterion and gap context),
-and that probability alone through raster_to_network at three thresholds, not adapted and
-adapted."""
-_LOOKS = ("baseline", "papers", "papers_model", "prob_adapted_0.4")
+and that probability alone through raster_to_network at three thresholds, not adapted,
+adapted, and adapted then re-scored by the context model (:mod:`gisroads.learn.context`)."""
+_LOOKS = ("baseline", "papers", "papers_model", "prob_adapted_0.4", "prob_context_0.4")
 
 
 def _burn_shapes(shapes, raster):
@@ -379,6 +382,7 @@ def _imagery_paths(record):
     from gisroads.imagery.pipeline import (PROBABILITY_METHOD, extract_image_roads,
                                            road_probability)
     from gisroads.learn import load_model, predict_probability
+    from gisroads.learn.context import context_probability
     from gisroads.learn.scores import pixel_auc
 
     # Massachusetts declares its white fill as no-data, as a user gives it to the model
@@ -386,7 +390,8 @@ def _imagery_paths(record):
                    else record.image)
     model = load_model()
     probability, plain_s = _timed(predict_probability, model_image, model)
-    adapted, adapted_s = _timed(road_probability, model_image, model)
+    adapted, adapted_s = _timed(road_probability, model_image, model, context=None)
+    context, context_s = _timed(context_probability, adapted)
     valid = _burn_shapes([record.valid_area], record.image)
     if record.truth_mask is not None:
         road = np.asarray(record.truth_mask.data, bool)
@@ -394,7 +399,9 @@ def _imagery_paths(record):
         road = _burn_shapes(shapely.buffer(record.truth.geometry.values, 3.0), record.image)
     auc = {"auc": pixel_auc(probability.data, road, valid),
            "auc_adapted": pixel_auc(adapted.data, road, valid),
-           "probability_s": plain_s, "probability_adapted_s": adapted_s}
+           "auc_context": pixel_auc(context.data, road, valid),
+           "probability_s": plain_s, "probability_adapted_s": adapted_s,
+           "probability_context_s": context_s}
     runs = {}
     (network, _), seconds = _timed(_image_baseline, record.image)
     runs["baseline"] = (network, seconds, {}, None)
@@ -405,7 +412,8 @@ def _imagery_paths(record):
     runs["papers_model"] = (roads.network, seconds + adapted_s, roads.report["timings_s"],
                             roads)
     for name, raster, extra in (("prob", probability, plain_s),
-                                ("prob_adapted", adapted, adapted_s)):
+                                ("prob_adapted", adapted, adapted_s),
+                                ("prob_context", context, adapted_s + context_s)):
         for threshold in (0.3, 0.4, 0.5):
             roads, seconds = _timed(extract_image_roads, record.image, probability=raster,
                                     method=PROBABILITY_METHOD,
@@ -431,7 +439,7 @@ def case_imagery_real(out: Path, data_dir: str, datasets=None) -> dict:
 
     default_path = ("papers_model" if imagery_pipeline.DEFAULT_METHOD
                     == imagery_pipeline.METHOD else
-                    f"prob_adapted_{imagery_pipeline.PROBABILITY_THRESHOLD}")
+                    f"prob_context_{imagery_pipeline.PROBABILITY_THRESHOLD}")
     looks = out / "imagery"
     looks.mkdir(exist_ok=True)
     per_image = {}
@@ -482,7 +490,7 @@ def case_imagery_real(out: Path, data_dir: str, datasets=None) -> dict:
         for key in _SCORES:
             result[f"{method}_road_parts_mean_{key}"] = float(np.nanmean(
                 [e[f"{method}_road_parts_{key}"] for e in scored]))
-    for key in ("auc", "auc_adapted"):
+    for key in _AUCS:
         result[f"mean_{key}"] = float(np.nanmean([e[key] for e in scored]))
     result["quality_ratio_to_baseline"] = (result["pipeline_mean_quality"]
                                            / result["baseline_mean_quality"])
@@ -503,9 +511,11 @@ def _reference_s() -> float:
 
 _PROBABILITY_STEPS = {"road probability of the model": "probability_model",
                       "fitting the model to the image": "probability_fit",
-                      "road probability of the adapted model": "probability_adapted"}
-"""The progress messages of :func:`gisroads.learn.training.adapted_probability` that start
-each step of the default path's probability stage, and the step they start."""
+                      "road probability of the adapted model": "probability_adapted",
+                      "road probability from its context": "probability_context"}
+"""The progress messages of :func:`gisroads.learn.training.adapted_probability` and
+:func:`gisroads.imagery.pipeline.road_probability` that start each step of the default
+path's probability stage, and the step they start."""
 
 
 def _probability_steps(messages: list) -> dict:

@@ -12,7 +12,8 @@ expressed in metres, so they hold at the input's pixel size; the segment counts,
 paper set per image, follow the image's ground area.
 
 Beyond the papers: a learned road probability (:mod:`gisroads.learn`; the bundled default
-model, adapted to each image from its own most confident pixels). By default
+model, adapted to each image from its own most confident pixels, then re-scored from its
+own shape by the context model, :mod:`gisroads.learn.context`). By default
 (:data:`DEFAULT_METHOD`) it goes alone through the shared network stage
 (:func:`gisroads.network.rasters.raster_to_network`), the better of the measured paths;
 with ``method="grote-rottensteiner"`` it runs the papers' stages, where it is an NCut
@@ -65,13 +66,15 @@ PROBABILITY_THRESHOLD = 0.4
 other. At 0.4 and 0.5 Massachusetts is above its naive baseline at both seeds (0.290 and
 0.285 at 0.4 against 0.273), at 0.3 not at seed 1 (0.271). Not adapted: 0.189 / 0.193 /
 0.168. The 42-feature model before it (24 m lines only): 0.270 / 0.270 / 0.257. With the
-image's own model alone (the default since), 0.297 / 0.297 / 0.296."""
+image's own model alone, 0.297 / 0.297 / 0.296; re-scored by the context model (the default
+since, calibrated for this threshold), 0.317 / 0.324 / 0.315."""
 DEFAULT_METHOD = PROBABILITY_METHOD
 """The path :func:`extract_image_roads` takes when given a model and no ``method``: the
-probability alone through the network stage, mean quality 0.297 on the 13 benchmark images
-against 0.183 for the papers' pipeline without a model, 0.202 with the probability in its
-stages and 0.224 for the naive baseline (one ``imagery_real`` run, the 49-feature model,
-the image's own model alone: ``learn.training.ADAPT_WEIGHT``)."""
+probability alone through the network stage, mean quality 0.324 on the 13 benchmark images
+(0.297 without the context model) against 0.183 for the papers' pipeline without a model,
+0.202 with the adapted probability in its stages and 0.224 for the naive baseline (one
+``imagery_real`` run, the 49-feature model, the image's own model alone:
+``learn.training.ADAPT_WEIGHT``, re-scored by :mod:`gisroads.learn.context`)."""
 
 
 TILE_PX = 1000
@@ -103,29 +106,61 @@ def resolve_model(model):
     raise TypeError(f"model must be a RoadModel, a path, 'default' or 'none', not {model!r}")
 
 
+def resolve_context(context, model):
+    """The context model (:mod:`gisroads.learn.context`) to re-score ``model``'s
+    probability with: for ``"default"`` the bundled one, unless ``model`` was trained on a
+    road layer (:func:`gisroads.learn.training.train_from_layer`: it has learnt the image's
+    own roads, and the context model was trained on the probabilities of models trained on
+    labelled tiles); None for ``None`` or ``"none"``; else a path or a model."""
+    from ..learn.context import load_context_model
+    from ..learn.model import RoadModel
+
+    if context is None or isinstance(context, RoadModel):
+        return context
+    if str(context).lower() == "none":
+        return None
+    if str(context).lower() == "default":
+        if model is not None and model.metadata.get("trained_on") == "road layer":
+            return None
+        return load_context_model()
+    return load_context_model(context)
+
+
 def road_probability(image: GeoRaster, model="default", *, adapt: bool = True,
-                     progress: Progress = None) -> GeoRaster:
+                     context="default", progress: Progress = None) -> GeoRaster:
     """The learned road probability of an image (float32 in [0, 1], NaN where no data).
 
     ``adapt`` adapts the model to the image from its own most confident pixels first
     (:func:`gisroads.learn.training.adapted_probability`, needs scikit-learn; without it
     the model is used as it is), taking as road samples only those of road colour
     (:func:`gisroads.imagery.baseline.road_colour_mask`), the naive baseline's cue: the
-    model's confident errors on other sensors are not grey."""
+    model's confident errors on other sensors are not grey. ``context`` then re-scores the
+    probability from its own shape (:func:`gisroads.learn.context.context_probability`;
+    :func:`resolve_context`: by default the bundled context model, except for a model
+    trained on a road layer)."""
     from importlib.util import find_spec
 
+    from ..learn.context import context_probability
     from ..learn.model import predict_probability
     from .baseline import road_colour_mask
 
     model = resolve_model(model)
     if model is None:
         raise ValueError("no model")
+    context = resolve_context(context, model)
+    first = progress if context is None else scaled(progress, 0.0, 0.85)
     if adapt and find_spec("sklearn") is not None:
         from ..learn.training import adapted_probability
-        return adapted_probability(image, model, road_like=road_colour_mask(image),
-                                   progress=progress)
-    report(progress, 0.0, "road probability")
-    probability = predict_probability(image, model)
+        probability = adapted_probability(image, model, road_like=road_colour_mask(image),
+                                          progress=first)
+    else:
+        report(first, 0.0, "road probability")
+        probability = predict_probability(image, model)
+        report(first, 1.0, "road probability")
+    if context is None:
+        return probability
+    report(progress, 0.85, "road probability from its context")
+    probability = context_probability(probability, context)
     report(progress, 1.0, "road probability")
     return probability
 
@@ -147,7 +182,7 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
                         n_segments: int | None = None, road_part_criteria: dict | None = None,
                         gap_options: dict | None = None, weight_options: dict | None = None,
                         network_options: dict | None = None,
-                        model="default", adapt: bool = True,
+                        model="default", adapt: bool = True, context="default",
                         probability: GeoRaster | None = None,
                         method: str | None = None,
                         probability_threshold: float = PROBABILITY_THRESHOLD,
@@ -179,9 +214,13 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
         ``None`` / ``"none"`` for the papers' pipeline alone.
     adapt : bool
         Adapt the model to the image from its own confident pixels first (scikit-learn).
+    context : "default", "none", str, Path or RoadModel
+        The context model that re-scores the probability on the probability path
+        (:func:`road_probability`, :func:`resolve_context`); the papers' stages take the
+        model's probability as it is (their thresholds were set on it).
     probability : GeoRaster, optional
-        A road probability already computed on the image's grid (then ``model`` and
-        ``adapt`` are not used).
+        A road probability already computed on the image's grid (then ``model``,
+        ``adapt`` and ``context`` are not used).
     method : str, optional
         ``"grote-rottensteiner"`` (the papers' stages, with the probability as road-part
         criterion and gap context when there is one) or ``"learned-probability"`` (the
@@ -211,7 +250,7 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
                         n_segments=n_segments, road_part_criteria=road_part_criteria,
                         gap_options=gap_options, weight_options=weight_options,
                         network_options=network_options, model=model, adapt=adapt,
-                        probability=probability, method=method,
+                        context=context, probability=probability, method=method,
                         probability_threshold=probability_threshold, tile_px=tile_px,
                         progress=progress)
 
@@ -234,23 +273,26 @@ class _StageClock:
 
 
 def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, gap_options,
-             weight_options, network_options, model, adapt, probability, method,
+             weight_options, network_options, model, adapt, context, probability, method,
              probability_threshold, tile_px, progress) -> ImageRoads:
     if image.crs is not None and not image.crs.is_projected:
         raise ValueError("the image must be in a projected CRS in metres (reproject it, "
                          "e.g. to its UTM zone)")
     timings = {}
     lap = _StageClock(timings)
-    if probability is None and resolve_model(model) is not None:
+    model = resolve_model(model)
+    method = method or (DEFAULT_METHOD if probability is not None or model is not None
+                        else METHOD)
+    if method not in (METHOD, PROBABILITY_METHOD):
+        raise ValueError(f"method must be {METHOD!r} or {PROBABILITY_METHOD!r}, not {method!r}")
+    if probability is None and model is not None:
         probability = road_probability(image, model, adapt=adapt,
-                                       progress=scaled(progress, 0.0, 0.15))
+                                       context=context if method == PROBABILITY_METHOD
+                                       else None, progress=scaled(progress, 0.0, 0.15))
         lap("probability")
     elif probability is not None and probability.shape != image.shape:
         raise ValueError(f"the probability {probability.shape} is not on the image grid "
                          f"{image.shape}")
-    method = method or (DEFAULT_METHOD if probability is not None else METHOD)
-    if method not in (METHOD, PROBABILITY_METHOD):
-        raise ValueError(f"method must be {METHOD!r} or {PROBABILITY_METHOD!r}, not {method!r}")
     if method == PROBABILITY_METHOD:
         if probability is None:
             raise ValueError(f"method {PROBABILITY_METHOD!r} needs a model")

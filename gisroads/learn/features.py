@@ -94,11 +94,18 @@ def feature_names() -> tuple[str, ...]:
     for s in COLOUR_SCALES_M:
         names += [f"{kind}_{s:g}m" for kind in ("saturation", "chroma_r", "chroma_g",
                                                  "excess_green")]
-    names += ["contrast", "intensity"]
+    return (*names, "contrast", "intensity", *line_feature_names())
+
+
+def line_feature_names(*, extremes: bool = False) -> tuple[str, ...]:
+    """Names of the arrays :func:`line_features` returns, in order."""
+    names = []
     for length in LINE_LENGTHS_M:
         names += [f"line_{kind}_{length:g}m" for kind in ("std_min", "std_max", "mean_along")]
         for d in LINE_OFFSETS_M:
             names += [f"line_bright_{d:g}m_{length:g}m", f"line_dark_{d:g}m_{length:g}m"]
+        if extremes:
+            names += [f"line_max_{length:g}m", f"line_min_{length:g}m"]
     return tuple(names)
 
 
@@ -337,7 +344,8 @@ def _line_means(z: np.ndarray, pixel_m: float, angle: float
     return out
 
 
-def line_features(z: np.ndarray, pixel_m: float) -> list[np.ndarray]:
+def line_features(z: np.ndarray, pixel_m: float, *, extremes: bool = False
+                  ) -> list[np.ndarray]:
     """Oriented line means of ``z`` in :data:`ORIENTATIONS` directions, for each length of
     :data:`LINE_LENGTHS_M` (24 m: a street between two junctions; 48 m: a road, longer
     than most forest gaps and driveways).
@@ -346,10 +354,12 @@ def line_features(z: np.ndarray, pixel_m: float) -> list[np.ndarray]:
     standard deviation of ``z`` along a line through the pixel (a road is homogeneous
     along itself), the mean along the most homogeneous line, and for each side offset
     ``d`` the most positive (``bright``) and most negative (``dark``) difference between
-    a line mean and the mean of the two parallel lines ``d`` to either side.
+    a line mean and the mean of the two parallel lines ``d`` to either side; with
+    ``extremes``, then the largest and the smallest line mean.
     """
     n = len(LINE_LENGTHS_M)
     std_min, std_max, along = [None] * n, [None] * n, [None] * n
+    largest, smallest = [None] * n, [None] * n
     bright = [[None] * len(LINE_OFFSETS_M) for _ in range(n)]
     dark = [[None] * len(LINE_OFFSETS_M) for _ in range(n)]
     for k in range(ORIENTATIONS):
@@ -358,10 +368,13 @@ def line_features(z: np.ndarray, pixel_m: float) -> list[np.ndarray]:
             std = np.sqrt(np.maximum(square - mean * mean, 0))
             if std_min[j] is None:
                 std_min[j], std_max[j], along[j] = std, std, mean
+                largest[j] = smallest[j] = mean
             else:
                 along[j] = np.where(std < std_min[j], mean, along[j])
                 std_min[j] = np.minimum(std_min[j], std)
                 std_max[j] = np.maximum(std_max[j], std)
+                largest[j] = np.maximum(largest[j], mean)
+                smallest[j] = np.minimum(smallest[j], mean)
             for i, offset in enumerate(LINE_OFFSETS_M):
                 # the normal of the line, in pixels
                 dy = int(round(offset / pixel_m * np.cos(angle)))
@@ -376,4 +389,6 @@ def line_features(z: np.ndarray, pixel_m: float) -> list[np.ndarray]:
         out += [std_min[j], std_max[j], along[j]]
         for b, d in zip(bright[j], dark[j]):
             out += [b, d]
+        if extremes:
+            out += [largest[j], smallest[j]]
     return out

@@ -22,7 +22,9 @@ key                dtype        meaning
 ``roots``          int32 (T,)   root node of each tree
 ``depth``          int          deepest leaf (levels of traversal)
 ``baseline``       float64      log-odds before the trees
-``feature_names``  str (F,)     :func:`~gisroads.learn.features.feature_names`
+``feature_names``  str (F,)     :func:`~gisroads.learn.features.feature_names`, or
+                                :func:`~gisroads.learn.context.context_feature_names`
+                                for a context model
 ``scales_m``       float64      :data:`~gisroads.learn.features.SCALES_M`, then
                                 ``COLOUR_SCALES_M``, ``CONTEXT_M``, ``WORK_PIXEL_M``,
                                 ``TRUNCATE``: a model is refused when they differ from
@@ -222,9 +224,12 @@ def save_model(model: RoadModel, path) -> Path:
     return path
 
 
-def load_model(path=None) -> RoadModel:
+def load_model(path=None, *, feature_names=None) -> RoadModel:
     """Read a model written by :func:`save_model` (the bundled default when ``path`` is
     None), never unpickling anything.
+
+    ``feature_names`` are those the model must use (default: the image features,
+    :func:`~gisroads.learn.features.feature_names`).
 
     Raises
     ------
@@ -247,7 +252,8 @@ def load_model(path=None) -> RoadModel:
         raise ValueError(f"{path}: road model version {version}; this gisroads reads "
                          f"version {MODEL_VERSION} (retrain it)")
     names = tuple(str(n) for n in arrays["feature_names"])
-    if names != ft.feature_names() or not np.array_equal(arrays["scales_m"], _scales()):
+    expected = ft.feature_names() if feature_names is None else tuple(feature_names)
+    if names != expected or not np.array_equal(arrays["scales_m"], _scales()):
         raise ValueError(f"{path}: the model was trained on other features than this "
                          "gisroads computes (retrain it)")
     return _checked(RoadModel(
@@ -262,7 +268,7 @@ def fit_model(X: np.ndarray, y: np.ndarray, *, seed: int = 0, max_iter: int = 80
               max_leaf_nodes: int = 31, max_depth: int = 6, learning_rate: float = 0.15,
               min_samples_leaf: int = 200, l2_regularization: float = 1.0,
               road_share: float | None = None, threads: int = 1,
-              metadata=None) -> RoadModel:
+              metadata=None, feature_names=None) -> RoadModel:
     """Train boosted trees on feature samples (needs scikit-learn).
 
     Parameters
@@ -271,6 +277,8 @@ def fit_model(X: np.ndarray, y: np.ndarray, *, seed: int = 0, max_iter: int = 80
         Feature samples (:func:`~gisroads.learn.features.compute_features` columns).
     y : ndarray of bool, shape (n,)
         Road (True) or not.
+    feature_names : sequence of str, optional
+        Names of the rows of ``X``; default :func:`~gisroads.learn.features.feature_names`.
     seed : int
         ``random_state`` of the classifier (early stopping is off, so the fit is
         deterministic for a given scikit-learn).
@@ -289,10 +297,11 @@ def fit_model(X: np.ndarray, y: np.ndarray, *, seed: int = 0, max_iter: int = 80
     from sklearn.ensemble import HistGradientBoostingClassifier
     from threadpoolctl import threadpool_limits
 
+    names = ft.feature_names() if feature_names is None else tuple(feature_names)
     X = np.asarray(X, np.float32)
     y = np.asarray(y, bool)
-    if X.ndim != 2 or X.shape[0] != len(ft.feature_names()) or X.shape[1] != len(y):
-        raise ValueError(f"expected X of shape ({len(ft.feature_names())}, n) and y of "
+    if X.ndim != 2 or X.shape[0] != len(names) or X.shape[1] != len(y):
+        raise ValueError(f"expected X of shape ({len(names)}, n) and y of "
                          f"shape (n,), got {X.shape} and {y.shape}")
     if y.all() or not y.any():
         raise ValueError("training needs both road and non-road samples")
@@ -306,7 +315,7 @@ def fit_model(X: np.ndarray, y: np.ndarray, *, seed: int = 0, max_iter: int = 80
     meta = {**(metadata or {}), "parameters": {**params, "seed": seed},
             "samples": int(len(y)), "sample_road_share": float(y.mean()),
             "calibrated_road_share": road_share}
-    model = from_sklearn(classifier, ft.feature_names(), metadata=meta)
+    model = from_sklearn(classifier, names, metadata=meta)
     if road_share is None:
         return model
     if not 0 < road_share < 1:
