@@ -155,13 +155,13 @@ def main(argv=None) -> int:
     import sklearn
 
     from gisroads.learn import features as ft
-    from gisroads.learn.context import SMOOTHING_M
+    from gisroads.learn.context import LINE_LENGTHS_M, SMOOTHING_M
 
     start = time.perf_counter()
     X, y = out_of_fold_samples(read_tiles(args.training), seed=args.seed)
     meta = {"data": "out-of-fold default-path probabilities of the ETH/EPFL training tiles",
             "folds": FOLDS, "copies": COPIES, "smoothing_m": list(SMOOTHING_M),
-            "line_lengths_m": list(ft.LINE_LENGTHS_M),
+            "line_lengths_m": list(LINE_LENGTHS_M),
             "line_offsets_m": list(ft.LINE_OFFSETS_M), "sklearn": sklearn.__version__,
             "format_version": 1}
     model = fit_model(X, y, seed=args.seed, road_share=ROAD_SHARE, metadata=meta,

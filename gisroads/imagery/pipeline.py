@@ -67,10 +67,10 @@ other. At 0.4 and 0.5 Massachusetts is above its naive baseline at both seeds (0
 0.285 at 0.4 against 0.273), at 0.3 not at seed 1 (0.271). Not adapted: 0.189 / 0.193 /
 0.168. The 42-feature model before it (24 m lines only): 0.270 / 0.270 / 0.257. With the
 image's own model alone, 0.297 / 0.297 / 0.296; re-scored by the context model (the default
-since, calibrated for this threshold), 0.317 / 0.324 / 0.315."""
+since, calibrated for this threshold), 0.352 / 0.353 / 0.336."""
 DEFAULT_METHOD = PROBABILITY_METHOD
 """The path :func:`extract_image_roads` takes when given a model and no ``method``: the
-probability alone through the network stage, mean quality 0.324 on the 13 benchmark images
+probability alone through the network stage, mean quality 0.353 on the 13 benchmark images
 (0.297 without the context model) against 0.183 for the papers' pipeline without a model,
 0.202 with the adapted probability in its stages and 0.224 for the naive baseline (one
 ``imagery_real`` run, the 49-feature model, the image's own model alone:

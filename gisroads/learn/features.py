@@ -97,10 +97,10 @@ def feature_names() -> tuple[str, ...]:
     return (*names, "contrast", "intensity", *line_feature_names())
 
 
-def line_feature_names(*, extremes: bool = False) -> tuple[str, ...]:
+def line_feature_names(*, extremes: bool = False, lengths_m=None) -> tuple[str, ...]:
     """Names of the arrays :func:`line_features` returns, in order."""
     names = []
-    for length in LINE_LENGTHS_M:
+    for length in LINE_LENGTHS_M if lengths_m is None else lengths_m:
         names += [f"line_{kind}_{length:g}m" for kind in ("std_min", "std_max", "mean_along")]
         for d in LINE_OFFSETS_M:
             names += [f"line_bright_{d:g}m_{length:g}m", f"line_dark_{d:g}m_{length:g}m"]
@@ -300,10 +300,11 @@ def _moved(values: np.ndarray, dy: int, dx: int) -> np.ndarray:
     return padded[pad + dy:pad + dy + rows, pad + dx:pad + dx + cols]
 
 
-def _line_means(z: np.ndarray, pixel_m: float, angle: float
+def _line_means(z: np.ndarray, pixel_m: float, angle: float, lengths_m=None
                 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Means of ``z`` and ``z ** 2`` along a centred line at ``angle`` (radians from the
-    x axis), one pair for each length of :data:`LINE_LENGTHS_M`.
+    x axis), one pair for each length of ``lengths_m`` (metres, ascending; default
+    :data:`LINE_LENGTHS_M`).
 
     The line of ``2 l`` starting at a pixel is the mean of the line of ``l`` starting there
     and the one starting ``l`` further on, so the lines are built by doubling a segment of
@@ -311,11 +312,12 @@ def _line_means(z: np.ndarray, pixel_m: float, angle: float
     with the logarithm of the length, not with the length (the 48 m line at 0.6 m would be
     an 80-pixel kernel, 4 times the time of every other feature together).
     """
+    lengths_m = LINE_LENGTHS_M if lengths_m is None else lengths_m
     step = np.array([-np.sin(angle), np.cos(angle)])  # one pixel along the line, (dy, dx)
-    shortest = LINE_LENGTHS_M[0] / pixel_m
+    shortest = lengths_m[0] / pixel_m
     length = shortest / 2 ** max(0, int(np.floor(np.log2(shortest / 4))))
     lengths = [length * 2 ** max(0, int(np.ceil(np.log2(target / pixel_m / length - 1e-6))))
-               for target in LINE_LENGTHS_M]
+               for target in lengths_m]
     # a centred line is the line starting (l - 1) / 2 behind the pixel; z is padded with its
     # edge values behind, so that a line near the border reads repeated pixels there, as a
     # centred kernel would, and not a line starting at the border and reaching l inward
@@ -344,11 +346,11 @@ def _line_means(z: np.ndarray, pixel_m: float, angle: float
     return out
 
 
-def line_features(z: np.ndarray, pixel_m: float, *, extremes: bool = False
-                  ) -> list[np.ndarray]:
+def line_features(z: np.ndarray, pixel_m: float, *, extremes: bool = False,
+                  lengths_m=None) -> list[np.ndarray]:
     """Oriented line means of ``z`` in :data:`ORIENTATIONS` directions, for each length of
-    :data:`LINE_LENGTHS_M` (24 m: a street between two junctions; 48 m: a road, longer
-    than most forest gaps and driveways).
+    ``lengths_m`` (metres, ascending; default :data:`LINE_LENGTHS_M`, 24 m: a street
+    between two junctions; 48 m: a road, longer than most forest gaps and driveways).
 
     Returns, for each length in :func:`feature_names` order: the smallest and largest
     standard deviation of ``z`` along a line through the pixel (a road is homogeneous
@@ -357,14 +359,15 @@ def line_features(z: np.ndarray, pixel_m: float, *, extremes: bool = False
     a line mean and the mean of the two parallel lines ``d`` to either side; with
     ``extremes``, then the largest and the smallest line mean.
     """
-    n = len(LINE_LENGTHS_M)
+    lengths_m = LINE_LENGTHS_M if lengths_m is None else lengths_m
+    n = len(lengths_m)
     std_min, std_max, along = [None] * n, [None] * n, [None] * n
     largest, smallest = [None] * n, [None] * n
     bright = [[None] * len(LINE_OFFSETS_M) for _ in range(n)]
     dark = [[None] * len(LINE_OFFSETS_M) for _ in range(n)]
     for k in range(ORIENTATIONS):
         angle = np.pi * k / ORIENTATIONS
-        for j, (mean, square) in enumerate(_line_means(z, pixel_m, angle)):
+        for j, (mean, square) in enumerate(_line_means(z, pixel_m, angle, lengths_m)):
             std = np.sqrt(np.maximum(square - mean * mean, 0))
             if std_min[j] is None:
                 std_min[j], std_max[j], along[j] = std, std, mean

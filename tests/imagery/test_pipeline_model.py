@@ -164,6 +164,6 @@ def test_context_stage_raises_correctness_on_a_real_tile():
         roads = extract_image_roads(image, probability=probability)
         scores[name] = buffer_metrics(roads.network.centrelines, record.truth,
                                       buffer_m=record.buffer_m, valid_area=record.valid_area)
-    # measured correctness 0.603 -> 0.677, completeness 0.709 -> 0.667, quality 0.487 -> 0.508
+    # measured correctness 0.603 -> 0.674, completeness 0.709 -> 0.714, quality 0.487 -> 0.531
     assert scores["context"].correctness > scores["first"].correctness + 0.04
-    assert scores["context"].quality > scores["first"].quality - 0.01
+    assert scores["context"].quality > scores["first"].quality + 0.02
