@@ -158,7 +158,7 @@ def score_image(record, model, *, adapt: bool) -> dict:
     """Pixel AUC and buffer scores of one benchmark image."""
     start = time.perf_counter()
     image = model_input(record)
-    probability = (road_probability(image, model) if adapt
+    probability = (road_probability(image, model, context=None) if adapt
                    else predict_probability(image, model))
     seconds = time.perf_counter() - start
     valid = _burn([record.valid_area], record.image)
@@ -315,7 +315,7 @@ shared (loaded) machine.
 """
     if rows_adapted:
         text += f"""
-### With self-adaptation (`gisroads.imagery.pipeline.road_probability`, the default)
+### With self-adaptation (`gisroads.imagery.pipeline.road_probability(context=None)`: the default path before its context model, `default_context_model.md`)
 The top 8 % of each image's pixels by this model's probability as road, only where the
 naive baseline's colour cue also takes them for road surface (grey, neither shadow nor
 white: `gisroads.imagery.baseline.road_colour_mask`; an image without such pixels keeps
