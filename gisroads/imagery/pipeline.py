@@ -114,15 +114,19 @@ def resolve_context(context, model):
     labelled tiles); None for ``None`` or ``"none"``; else a path or a model."""
     from ..learn.context import load_context_model
     from ..learn.model import RoadModel
+    from ..learn.training import trained_on_road_layer
 
     if context is None or isinstance(context, RoadModel):
         return context
     if str(context).lower() == "none":
         return None
     if str(context).lower() == "default":
-        if model is not None and model.metadata.get("trained_on") == "road layer":
+        if model is not None and trained_on_road_layer(model):
             return None
         return load_context_model()
+    if not Path(context).is_file():
+        raise ValueError(f"{context}: no such context model file (give a .npz written by "
+                         "scripts/train_context_model.py, 'default' or 'none')")
     return load_context_model(context)
 
 

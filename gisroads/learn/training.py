@@ -240,6 +240,15 @@ def layer_labels(grid: WorkGrid, roads: gpd.GeoDataFrame, *, width_m=None,
     return burn(core), ~burn(guard)
 
 
+ROAD_LAYER = "road layer"
+"""``metadata["trained_on"]`` of a model of :func:`train_from_layer`."""
+
+
+def trained_on_road_layer(model: RoadModel) -> bool:
+    """Whether ``model`` was trained on an image's own road layer (:func:`train_from_layer`)."""
+    return model.metadata.get("trained_on") == ROAD_LAYER
+
+
 def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
                      width_field: str | None = None, default_width_m: float = 6.0,
                      guard_m: float = 5.0, core_fraction: float = 0.5,
@@ -354,7 +363,7 @@ def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
     if base_samples is not None:
         X = np.concatenate([X, np.asarray(base_samples[0], np.float32)], axis=1)
         y = np.concatenate([y, np.asarray(base_samples[1], bool)])
-    meta = {"trained_on": "road layer", "guard_m": guard_m, "core_fraction": core_fraction,
+    meta = {"trained_on": ROAD_LAYER, "guard_m": guard_m, "core_fraction": core_fraction,
             "default_width_m": default_width_m, "base_samples": base_samples is not None,
             "unmapped_probability": unmapped_probability, "unmapped_px": unmapped}
     report(progress, 0.8, f"fitting the model on {len(y)} samples")
@@ -587,7 +596,7 @@ def adapted_probability(image: GeoRaster, model: RoadModel, *, weight: float | N
         As :func:`~gisroads.learn.model.predict_probability`.
     """
     if weight is None:
-        weight = (LAYER_MODEL_WEIGHT if model.metadata.get("trained_on") == "road layer"
+        weight = (LAYER_MODEL_WEIGHT if trained_on_road_layer(model)
                   else ADAPT_WEIGHT)
     if not 0 <= weight <= 1:
         raise ValueError(f"weight must be in [0, 1], not {weight}")
