@@ -228,7 +228,7 @@ def cmd_image(args) -> int:
     from .jobs import image_job
     result = image_job(args.input, args.out, nir_band=args.nir_band, red_band=args.red_band,
                        dsm_path=args.dsm, pixel_m=args.pixel, crs=args.crs,
-                       quicklook=args.quicklook, model=args.model,
+                       quicklook=args.quicklook, model=args.model, context=args.context,
                        probability_path=args.probability, method=args.method,
                        n_segments=args.segments, progress=_ProgressBar(not args.json))
     _print(_then_compare(args, result), args.json)
@@ -507,8 +507,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = add("image", cmd_image, "extract roads from an aerial image (learned cue; "
                                 "Grote & Rottensteiner)",
             "Extract the road network of an aerial image (RGB, CIR or panchromatic GeoTIFF). "
-            "By default a learned road probability (the bundled model, adapted to the image; "
-            "--model) goes through the network stage of 'gisroads vectorize'. With --model "
+            "By default a learned road probability (the bundled model, adapted to the image "
+            "and re-scored by the context model; --model, --context) goes through the network stage of 'gisroads vectorize'. With --model "
             "none, or --method grote-rottensteiner, the papers' pipeline (a NIR band and a "
             "DSM are used when given): normalized-cut over-segmentation, "
             "grouping of segments, road-part shape filtering, linking of road parts with an "
@@ -533,6 +533,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="learned road cue (beyond the papers): 'default' (the bundled model, "
                         "the default), a model file written by 'gisroads train' (.npz), or "
                         "'none' (the papers' pipeline alone)")
+    p.add_argument("--context", default="default",
+                   help="context model that re-scores the probability from its own shape "
+                        "before the network stage (beyond the papers): 'default' (the "
+                        "bundled one; not for a model trained with 'gisroads train'), a "
+                        "file written by scripts/train_context_model.py (.npz), or 'none'")
     p.add_argument("--method", choices=("learned-probability", "grote-rottensteiner"),
                    help="with a model: its probability alone through the network stage "
                         "(learned-probability, the default: the better on the benchmark) or "

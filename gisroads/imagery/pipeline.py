@@ -289,10 +289,13 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
                         else METHOD)
     if method not in (METHOD, PROBABILITY_METHOD):
         raise ValueError(f"method must be {METHOD!r} or {PROBABILITY_METHOD!r}, not {method!r}")
+    # the papers' stages take the first-stage probability: their thresholds were set on it
+    context = (resolve_context(context, model)
+               if probability is None and model is not None and method == PROBABILITY_METHOD
+               else None)
     if probability is None and model is not None:
-        probability = road_probability(image, model, adapt=adapt,
-                                       context=context if method == PROBABILITY_METHOD
-                                       else None, progress=scaled(progress, 0.0, 0.15))
+        probability = road_probability(image, model, adapt=adapt, context=context,
+                                       progress=scaled(progress, 0.0, 0.15))
         lap("probability")
     elif probability is not None and probability.shape != image.shape:
         raise ValueError(f"the probability {probability.shape} is not on the image grid "
@@ -309,7 +312,7 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
         timings["total"] = sum(timings.values())
         return ImageRoads(network, {
             "timings_s": timings, "method": method, "probability": probability,
-            "cues": {"cues": "model", "model": True},
+            "cues": {"cues": "model", "model": True}, "context_model": context is not None,
             "gap_edges": len(network.qa["gap_edges"]),
             "roads": len(network.centrelines)})
     base = 0.15 if "probability" in timings else 0.0

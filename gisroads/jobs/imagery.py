@@ -18,7 +18,8 @@ from .common import (_map_lines, _network_quicklook, _write_network, network_sum
 
 def image_job(image_path, out_path, *, nir_band: int | None = None,
               red_band: int | None = None, dsm_path=None, pixel_m: float | None = None,
-              crs=None, quicklook=None, model="default", probability_path=None,
+              crs=None, quicklook=None, model="default", context="default",
+              probability_path=None,
               method: str | None = None, n_segments: int | None = None,
               probability_threshold: float = PROBABILITY_THRESHOLD,
               adapt: bool = stage_default(extract_image_roads, "adapt"),
@@ -36,7 +37,9 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     probability as a float32 GeoTIFF (band ``road_probability``, 0-1, NaN no data) on the
     grid the image was worked on (its UTM zone for a geographic image). ``model``:
     ``"default"``, a model file of :func:`train_job`, or ``"none"`` (the papers' pipeline
-    alone). The parameters from ``method`` on are those of
+    alone). ``context``: the context model that re-scores the probability on the
+    probability path (:func:`gisroads.imagery.pipeline.resolve_context`: ``"default"``,
+    ``"none"`` or a model file). The parameters from ``method`` on are those of
     :func:`gisroads.imagery.pipeline.extract_image_roads`. An image without roads gives
     empty layers and a :class:`~gisroads.errors.NoRoadFoundWarning`.
     """
@@ -51,7 +54,8 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
         raise GisroadsError("a road probability raster needs a model (not --model none)")
     dsm = read_raster(dsm_path) if dsm_path is not None else None
     roads = extract_image_roads(
-        image, nir_band=nir_band, red_band=red_band, dsm=dsm, model=model, method=method,
+        image, nir_band=nir_band, red_band=red_band, dsm=dsm, model=model, context=context,
+        method=method,
         n_segments=n_segments, probability_threshold=probability_threshold, adapt=adapt,
         threads=threads, road_part_criteria=road_part_criteria, gap_options=gap_options,
         weight_options=weight_options, network_options=network_options,
@@ -59,7 +63,8 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     network = roads.network
     _write_network(out_path, network, image.crs, source_crs, image_path)
     result = {**network_summary(out_path, network), "cues": roads.report["cues"]["cues"],
-              "method": roads.report["method"], "timings_s": roads.report["timings_s"]}
+              "method": roads.report["method"], "timings_s": roads.report["timings_s"],
+              "context_model": roads.report.get("context_model", False)}
     if probability_path is not None:
         result["probability"] = write_geotiff(probability_path, roads.report["probability"],
                                               band_names=["road_probability"])

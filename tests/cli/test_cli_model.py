@@ -59,6 +59,8 @@ def test_image_with_the_trained_model_finds_the_roads_and_writes_the_probability
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert "model" in summary["cues"] and summary["roads"] > 0
+    # a model trained on the layer keeps its own probability (no context model)
+    assert summary["context_model"] is False
     assert summary["probability"] == str(tmp_path / "p.tif")
     probability = read_raster(tmp_path / "p.tif")
     assert probability.data.dtype == np.float32 and probability.data.shape[0] == 1
@@ -88,6 +90,10 @@ def test_model_errors_are_one_line_and_write_nothing(scene, tmp_path):
                         tmp_path / "missing.npz"), "missing.npz"),
         "not a model": (("image", folder / "image.tif", "-o", tmp_path / "r.gpkg",
                          "--model", folder / "truth.gpkg"), "not a road model"),
+        "context file": (("image", folder / "image.tif", "-o", tmp_path / "r.gpkg",
+                          "--context", tmp_path / "missing.npz"), "no such context model"),
+        "not a context model": (("image", folder / "image.tif", "-o", tmp_path / "r.gpkg",
+                                 "--context", folder / "model.npz"), "other features"),
         "probability without model": (("image", folder / "image.tif", "-o",
                                        tmp_path / "r.gpkg", "--model", "none",
                                        "--probability", tmp_path / "p.tif"), "needs a model"),
@@ -99,6 +105,24 @@ def test_model_errors_are_one_line_and_write_nothing(scene, tmp_path):
         assert len(lines) == 1 and lines[0].startswith("gisroads: error: "), (name, lines)
         assert phrase in lines[0], (name, lines[0])
     assert list(tmp_path.iterdir()) == []
+
+
+def test_context_model_on_by_default_and_off_with_none(scene, tmp_path):
+    """The bundled model's probability is re-scored by the context model unless --context
+    none; the two probability rasters differ, each is a probability."""
+    folder, _ = scene
+    summaries, rasters = {}, {}
+    for context in ("default", "none"):
+        result = gisroads("image", folder / "image.tif", "-o", tmp_path / f"{context}.gpkg",
+                          "--context", context, "--probability", tmp_path / f"{context}.tif",
+                          "--json")
+        assert result.returncode == 0, result.stderr
+        summaries[context] = json.loads(result.stdout)
+        rasters[context] = read_raster(tmp_path / f"{context}.tif").data[0]
+    assert summaries["default"]["context_model"] is True
+    assert summaries["none"]["context_model"] is False
+    assert np.nanmax(np.abs(rasters["default"] - rasters["none"])) > 0.1
+    assert all(np.nanmin(r) >= 0 and np.nanmax(r) <= 1 for r in rasters.values())
 
 
 @pytest.mark.parametrize("model", ["default", "trained"])

@@ -48,6 +48,19 @@ def test_train_errors_are_processing_errors(qgis_process, scene_dir, tmp_path):
     assert not (tmp_path / "m.npz").exists()
 
 
+def test_context_model_can_be_switched_off(qgis_process, scene_dir, tmp_path):
+    """The bundled model's probability is re-scored by the context model unless USE_CONTEXT
+    is off: the two probability rasters differ."""
+    rasters = {}
+    for use in ("true", "false"):
+        result = qgis_process.run("imageryroadnetwork", INPUT=scene_dir / "image.tif",
+                                  USE_CONTEXT=use, PROBABILITY=tmp_path / f"p_{use}.tif",
+                                  OUTPUT=tmp_path / f"roads_{use}.gpkg")
+        assert "model" in result["CUES"]
+        rasters[use] = read_raster(tmp_path / f"p_{use}.tif").data[0]
+    assert np.nanmax(np.abs(rasters["true"] - rasters["false"])) > 0.1
+
+
 def test_papers_pipeline_alone_writes_no_probability(qgis_process, scene_dir, tmp_path):
     result = qgis_process.run("imageryroadnetwork", INPUT=scene_dir / "image.tif",
                               USE_MODEL="false", OUTPUT=tmp_path / "roads.gpkg")
