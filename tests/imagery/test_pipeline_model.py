@@ -78,6 +78,36 @@ def test_models_by_name_file_and_errors(scene_rgb, tmp_path):
         extract_image_roads(rgb, probability=small)
 
 
+def test_a_layer_trained_model_follows_its_faint_roads(scene_rgb):
+    """With a model trained on the image's road layer the probability path's mask grows
+    into the faint pixels joined to a confident road (hysteresis at
+    ``LAYER_LOW_THRESHOLD`` of the threshold); with the bundled model it stops where the
+    probability falls under the threshold."""
+    from dataclasses import replace
+
+    from gisroads.learn.training import ROAD_LAYER
+
+    _, rgb, _ = scene_rgb
+    rows, cols = rgb.shape
+    probability = np.full(rgb.shape, 0.02, np.float32)
+    band = slice(rows // 2 - 8, rows // 2 + 8)  # an 8 m road across the image
+    probability[band, : cols // 2] = 0.9
+    probability[band, cols // 2:] = 0.32  # above 0.7 * 0.4, under 0.4
+    probability = GeoRaster(probability, rgb.transform, rgb.crs)
+    default = resolve_model("default")
+    layer = replace(default, metadata={**default.metadata, "trained_on": ROAD_LAYER})
+    km = {}
+    for name, model in (("default", default), ("layer", layer)):
+        roads = extract_image_roads(rgb, probability=probability, model=model)
+        km[name] = roads.network.centrelines.length.sum() / 1000
+        assert roads.report["low_threshold"] == (None if name == "default"
+                                                  else pytest.approx(0.28))
+    extent_km = cols * rgb.pixel_size / 1000
+    print(km, extent_km)
+    assert km["layer"] > 0.9 * extent_km
+    assert km["default"] < 0.6 * extent_km
+
+
 def test_default_model_runs_and_reports_its_probability(scene_rgb):
     scene, rgb, surface = scene_rgb
     crop = GeoRaster(rgb.data[:, :300, :300], rgb.transform, rgb.crs)
