@@ -8,9 +8,11 @@ from rasterio import features as rio_features
 from gisroads.evaluate import buffer_metrics
 from gisroads.geo import GeoRaster
 from gisroads.imagery.pipeline import extract_image_roads
-from gisroads.learn.model import WorkGrid, load_model, predict_probability
+from gisroads.learn.model import WorkGrid, load_model, predict_probability, work_probability
 from gisroads.learn.scores import pixel_auc
-from gisroads.learn.training import adapt_to_image, elongated, layer_labels, train_from_layer
+from gisroads.learn.training import (LAYER_POSITIVE_SHARE, POSITIVE_SHARE, adapt_to_image,
+                                      elongated, fit_to_image, layer_labels,
+                                      layer_positive_share, train_from_layer)
 
 pytest.importorskip("sklearn")
 
@@ -75,6 +77,26 @@ def test_extraction_with_a_layer_trained_model_finds_a_held_out_road():
     completeness = buffer_metrics(found, roads.iloc[[1]], buffer_m=3.0).completeness
     print(f"held-out road: completeness {completeness:.3f}")
     assert completeness >= HELD_OUT_COMPLETENESS_MIN
+
+
+def test_a_layer_model_adapts_with_the_share_of_the_image_its_roads_cover():
+    """A model trained on a layer records the share of the image its roads cover (five
+    8 m roads across 200 m: 0.19), and the adaptation takes that share of the image's
+    pixels as road samples, within ``LAYER_POSITIVE_SHARE``."""
+    from dataclasses import replace
+
+    image, roads, road, _, _ = _five_roads()
+    model = train_from_layer(image, roads, width_m=8.0, samples=4000, max_iter=10, seed=0)
+    share = model.metadata["road_surface_share"]
+    assert share == pytest.approx(road.mean(), abs=0.02)
+    assert layer_positive_share(model) == pytest.approx(share)
+    sparse = replace(model, metadata={**model.metadata, "road_surface_share": 0.005})
+    assert layer_positive_share(sparse) == LAYER_POSITIVE_SHARE[0]
+    grid = WorkGrid(image)
+    probability = work_probability(grid, model)
+    for given, expected in ((model, share), (load_model(), POSITIVE_SHARE)):
+        own = fit_to_image(grid, probability, given)
+        assert own.metadata["positive_share"] == pytest.approx(expected)
 
 
 def test_roads_missing_from_the_layer_are_kept_out_of_the_negatives():
