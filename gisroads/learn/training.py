@@ -445,7 +445,9 @@ def layer_positive_share(model: RoadModel) -> float:
     OpenStreetMap lines (16 % of the image): completeness 0.491 against 0.367, correctness
     0.816 against 0.943 (shares of 0.10-0.20 give 0.40-0.71 there: one image, noisy).
     """
-    share = model.metadata.get("road_surface_share") or 0.0
+    share = model.metadata.get("road_surface_share")
+    if share is None:  # trained before the share was recorded
+        return POSITIVE_SHARE
     return float(np.clip(share, *LAYER_POSITIVE_SHARE))
 
 

@@ -92,6 +92,8 @@ def test_a_layer_model_adapts_with_the_share_of_the_image_its_roads_cover():
     assert layer_positive_share(model) == pytest.approx(share)
     sparse = replace(model, metadata={**model.metadata, "road_surface_share": 0.005})
     assert layer_positive_share(sparse) == LAYER_POSITIVE_SHARE[0]
+    older = {k: v for k, v in model.metadata.items() if k != "road_surface_share"}
+    assert layer_positive_share(replace(model, metadata=older)) == POSITIVE_SHARE
     grid = WorkGrid(image)
     probability = work_probability(grid, model)
     for given, expected in ((model, share), (load_model(), POSITIVE_SHARE)):
