@@ -64,7 +64,8 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     _write_network(out_path, network, image.crs, source_crs, image_path)
     result = {**network_summary(out_path, network), "cues": roads.report["cues"]["cues"],
               "method": roads.report["method"], "timings_s": roads.report["timings_s"],
-              "context_model": roads.report.get("context_model", False)}
+              "context_model": roads.report.get("context_model", False),
+              "low_threshold": roads.report.get("low_threshold")}
     if probability_path is not None:
         result["probability"] = write_geotiff(probability_path, roads.report["probability"],
                                               band_names=["road_probability"])
