@@ -508,7 +508,8 @@ def build_parser() -> argparse.ArgumentParser:
                                 "Grote & Rottensteiner)",
             "Extract the road network of an aerial image (RGB, CIR or panchromatic GeoTIFF). "
             "By default a learned road probability (the bundled model, adapted to the image "
-            "and re-scored by the context model; --model, --context) goes through the network stage of 'gisroads vectorize'. With --model "
+            "and re-scored by the context model; --model, --context) goes through the "
+            "network stage of 'gisroads vectorize'. With --model "
             "none, or --method grote-rottensteiner, the papers' pipeline (a NIR band and a "
             "DSM are used when given): normalized-cut over-segmentation, "
             "grouping of segments, road-part shape filtering, linking of road parts with an "

@@ -79,8 +79,8 @@ LAYER_LOW_THRESHOLD = 0.7
 """With a model trained on the image's own road layer
 (:func:`gisroads.learn.training.train_from_layer`), the probability path's road mask grows
 from the pixels at ``probability_threshold`` into those connected to them at this share of
-it (hysteresis, ``low_threshold`` of :func:`gisroads.network.rasters.skeleton_parts`): such a model
-knows the image, and a road it misses in dappled shade still holds a faint line of
+it (hysteresis, ``low_threshold`` of :func:`gisroads.network.rasters.skeleton_parts`): such
+a model knows the image, and a road it misses in dappled shade still holds a faint line of
 probability joined to the road it finds. Issue 15's update case (``make bench``
 ``imagery_layer_training``: each scored Massachusetts tile, 30 % of the reference roads
 deleted, eight seeds): completeness of the deleted roads 0.780 against 0.762 without it

@@ -10,7 +10,7 @@ only the first probability and its shape (:func:`context_features`: its Gaussian
 gives the road probability again (:func:`context_probability`). It sees no colour, so it
 carries across sensors better than the first model. It is trained on probabilities the
 first stage gives on training tiles it was not trained on (out-of-fold), so that it learns
-the first stage's errors as they are on unseen images (``scripts/train_road_model.py``).
+the first stage's errors as they are on unseen images (``scripts/train_context_model.py``).
 """
 from __future__ import annotations
 
