@@ -11,7 +11,7 @@ export OPENBLAS_NUM_THREADS := 1
 .PHONY: demo test test-core test-core-qgis test-qgis plugin bench bench-city setup setup-core
 
 setup:
-	@scripts/setup.sh apt venv qgis
+	@scripts/setup.sh apt venv train qgis
 
 setup-core:
 	@scripts/setup.sh apt venv

@@ -37,32 +37,36 @@ snakes
     map alone gives, with the width known).
 imagery_real
     Every image of ../shared/data/imagery (gisroads.imagery.datasets) through every imagery
-    path: the naive threshold-morphology-skeleton baseline, the papers' pipeline without a
-    model, with the adapted default model's probability in its stages, and that probability
-    (plain and adapted) alone through raster_to_network at 0.3 / 0.4 / 0.5: completeness,
-    correctness and quality per image, per dataset and on average (buffer 3 m, Massachusetts
-    4 m, no-data excluded), the default model's held-out pixel AUC (plain, adapted),
-    seconds, per-stage seconds, quick-looks in OUT/imagery/, the tables in
-    OUT/imagery_real.md; also the papers' road-part centre lines alone. ``pipeline_*`` is the
-    default path of extract_image_roads.
+    path (IMAGERY_PATHS): the naive threshold-morphology-skeleton baseline, the
+    convolutional network's probability through raster_to_network at its own threshold
+    (the default path) and at 0.3 / 0.4 / 0.5, the papers' pipeline without a model and with
+    the network's or the adapted boosted trees' probability in its stages, the boosted
+    trees' probability alone (plain, adapted, re-scored by the context model):
+    completeness, correctness and quality per image, per dataset and on average (buffer 3 m,
+    Massachusetts 4 m, no-data excluded), held-out pixel AUC of each model, seconds,
+    per-stage seconds, quick-looks in OUT/imagery/, the tables in OUT/imagery_real.md; also
+    the papers' road-part centre lines alone. ``pipeline_*`` is the default path of
+    extract_image_roads.
 imagery_layer_training
-    Training from a road layer (issue 15): on each scored Massachusetts tile and SpaceNet
-    Paris, whole roads making 30 % of the reference length are deleted (seeded; roads are
-    the truth lines chained straight on through their junctions), a model is trained on the
-    rest (calibrated like the bundled model) and the image extracted with it (adapted, as
-    ``gisroads image --model``, and not adapted; also trained with the unmapped-road pass,
-    not adapted): completeness on the deleted roads,
-    correctness of what is found away from the kept roads, scores on all roads, pixel AUC,
-    beside the default model without a layer; Paris also trained on all its OpenStreetMap
-    lines. Tables in OUT/imagery_layer_training.md, quick-looks in OUT/imagery/.
+    Training from a road layer (the agency's update case): on each scored Massachusetts
+    tile and SpaceNet Paris, eight seeds each, whole roads making 30 % of the reference
+    length are deleted (roads are the truth lines chained straight on through their
+    junctions), the convolutional network is fine-tuned on the rest and boosted trees are
+    trained on it, and the image extracted with each as ``gisroads image --model`` does:
+    completeness on the deleted roads, correctness of what is found away from the kept
+    roads, scores on all roads, pixel AUC, beside the bundled network without a layer;
+    Paris also trained on all its OpenStreetMap lines. Tables in
+    OUT/imagery_layer_training.md, quick-looks in OUT/imagery/.
 imagery_tile
     The default imagery path on 1000 x 1000 tiles on one core, twice each: a synthetic RGB
     tile (0.3 m) and a Massachusetts crop (1 m): per-stage seconds (the probability's steps:
     the bundled model's probability, the fit to the image, the adapted probability; the
     network), the features alone, the adapted model's probability predicted from scratch,
     scores against the truth beside the naive baseline, each beside a fixed numpy reference
-    workload timed in the same run (the machine may be shared); then once more with a
-    CPU-bound process on the same core (``loaded``).
+    workload timed in the same run (the machine may be shared); the whole ``gisroads image``
+    command on the tile as a user runs it (``command_s``, start-up included, and
+    ``command_over_reference``); then once more with a CPU-bound process on the same core
+    (``loaded``).
 city
     Only with ``--city`` (``make bench-city``): a synthetic city streamed to LAZ, end to end
     with 1 and 2 workers (``bench/city.py``): wall and CPU time, seconds per km², peak memory
@@ -302,7 +306,7 @@ def _image_baseline(image):
 
 
 _SCORES = ("completeness", "correctness", "quality")
-_AUCS = ("auc", "auc_adapted", "auc_context")
+_AUCS = ("auc_convnet", "auc", "auc_adapted", "auc_context")
 
 
 def _imagery_table(per_image: dict, methods, default_path: str) -> str:
@@ -310,10 +314,11 @@ def _imagery_table(per_image: dict, methods, default_path: str) -> str:
     correctness / quality and seconds, and the default model's held-out pixel AUC."""
     scored = {name: e for name, e in per_image.items() if e["scored"]}
     lines = ["Quality per image (C / K / Q in the second table); AUC = held-out pixel AUC of "
-             "the default model, plain / adapted / adapted and re-scored by the context "
-             "model.", "",
-             "| image | AUC | AUC adapted | AUC context | " + " | ".join(methods) + " |",
-             "|" + "---|" * (4 + len(methods))]
+             "the convolutional network, and of the boosted trees plain / adapted / adapted "
+             "and re-scored by the context model.", "",
+             "| image | AUC network | AUC boosted | AUC adapted | AUC context | "
+             + " | ".join(methods) + " |",
+             "|" + "---|" * (5 + len(methods))]
 
     def row(label, entries):
         cells = [f"{np.nanmean([e.get(k, np.nan) for e in entries]):.3f}"
@@ -338,7 +343,7 @@ def _imagery_table(per_image: dict, methods, default_path: str) -> str:
                            if e["dataset"] == d]) for d in datasets]
         lines.append(f"| {m} | " + " | ".join(f"{v:.3f}" for v in mean[:3])
                      + f" | {mean[3]:.1f} | " + " | ".join(f"{v:.3f}" for v in per) + " |")
-    for m in ("papers", "papers_model"):
+    for m in ("papers", "papers_convnet", "papers_model"):
         parts = [np.nanmean([e.get(f"{m}_road_parts_{k}", np.nan) for e in scored.values()])
                  for k in _SCORES]
         lines += ["", f"{m}: road-part centre lines alone (before linking and network "
@@ -354,14 +359,16 @@ def _imagery_table(per_image: dict, methods, default_path: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-IMAGERY_PATHS = ("baseline", "papers", "papers_model", "prob_0.3", "prob_0.4", "prob_0.5",
-                 "prob_adapted_0.3", "prob_adapted_0.4", "prob_adapted_0.5",
-                 "prob_context_0.3", "prob_context_0.4", "prob_context_0.5")
-"""Paths of :func:`case_imagery_real`: the naive baseline, the papers' pipeline without a
-model, with the adapted default model's probability (road-part criterion and gap context),
-and that probability alone through raster_to_network at three thresholds, not adapted,
-adapted, and adapted then re-scored by the context model (:mod:`gisroads.learn.context`)."""
-_LOOKS = ("baseline", "papers", "papers_model", "prob_adapted_0.4", "prob_context_0.4")
+IMAGERY_PATHS = ("baseline", "convnet", "convnet_0.3", "convnet_0.4", "convnet_0.5",
+                 "papers", "papers_convnet", "papers_model", "prob_0.4",
+                 "prob_adapted_0.4", "prob_context_0.3", "prob_context_0.4", "prob_context_0.5")
+"""Paths of :func:`case_imagery_real`: the naive baseline; the convolutional network's
+probability through raster_to_network at its own threshold (``convnet``, the default path)
+and at three others; the papers' pipeline without a model, with the network's probability
+and with the adapted boosted trees' probability (road-part criterion and gap context); the
+boosted trees' probability alone through raster_to_network, not adapted, adapted, and
+adapted then re-scored by the context model (:mod:`gisroads.learn.context`, ``boosted``)."""
+_LOOKS = ("baseline", "convnet", "papers", "papers_convnet", "prob_context_0.4")
 
 
 def _burn_shapes(shapes, raster):
@@ -383,11 +390,14 @@ def _imagery_paths(record):
                                            road_probability)
     from gisroads.learn import load_model, predict_probability
     from gisroads.learn.context import context_probability
+    from gisroads.learn.convnet import convnet_probability, load_convnet
     from gisroads.learn.scores import pixel_auc
 
     # Massachusetts declares its white fill as no-data, as a user gives it to the model
     model_image = (replace(record.image, nodata=255) if record.dataset == "massachusetts"
                    else record.image)
+    network = load_convnet()
+    convnet, convnet_s = _timed(convnet_probability, model_image, network)
     model = load_model()
     probability, plain_s = _timed(predict_probability, model_image, model)
     adapted, adapted_s = _timed(road_probability, model_image, model, context=None)
@@ -397,9 +407,11 @@ def _imagery_paths(record):
         road = np.asarray(record.truth_mask.data, bool)
     else:  # OpenStreetMap lines only: a 3 m band around them
         road = _burn_shapes(shapely.buffer(record.truth.geometry.values, 3.0), record.image)
-    auc = {"auc": pixel_auc(probability.data, road, valid),
+    auc = {"auc_convnet": pixel_auc(convnet.data, road, valid),
+           "auc": pixel_auc(probability.data, road, valid),
            "auc_adapted": pixel_auc(adapted.data, road, valid),
            "auc_context": pixel_auc(context.data, road, valid),
+           "probability_convnet_s": convnet_s,
            "probability_s": plain_s, "probability_adapted_s": adapted_s,
            "probability_context_s": context_s}
     runs = {}
@@ -407,18 +419,22 @@ def _imagery_paths(record):
     runs["baseline"] = (network, seconds, {}, None)
     roads, seconds = _timed(extract_image_roads, record.image, model=None)
     runs["papers"] = (roads.network, seconds, roads.report["timings_s"], roads)
-    roads, seconds = _timed(extract_image_roads, record.image, probability=adapted,
-                            method="grote-rottensteiner")
-    runs["papers_model"] = (roads.network, seconds + adapted_s, roads.report["timings_s"],
-                            roads)
-    for name, raster, extra in (("prob", probability, plain_s),
-                                ("prob_adapted", adapted, adapted_s),
-                                ("prob_context", context, adapted_s + context_s)):
-        for threshold in (0.3, 0.4, 0.5):
+    for name, raster, extra in (("papers_model", adapted, adapted_s),
+                                ("papers_convnet", convnet, convnet_s)):
+        roads, seconds = _timed(extract_image_roads, record.image, probability=raster,
+                                method="grote-rottensteiner")
+        runs[name] = (roads.network, seconds + extra, roads.report["timings_s"], roads)
+    for name, raster, extra, thresholds in (
+            ("convnet", convnet, convnet_s, (network.threshold, 0.3, 0.4, 0.5)),
+            ("prob", probability, plain_s, (0.4,)),
+            ("prob_adapted", adapted, adapted_s, (0.4,)),
+            ("prob_context", context, adapted_s + context_s, (0.3, 0.4, 0.5))):
+        for k, threshold in enumerate(thresholds):
             roads, seconds = _timed(extract_image_roads, record.image, probability=raster,
                                     method=PROBABILITY_METHOD,
                                     probability_threshold=threshold)
-            runs[f"{name}_{threshold}"] = (roads.network, seconds + extra, {}, None)
+            path = name if name == "convnet" and k == 0 else f"{name}_{threshold}"
+            runs[path] = (roads.network, seconds + extra, {}, None)
     return runs, auc
 
 
@@ -437,9 +453,8 @@ def case_imagery_real(out: Path, data_dir: str, datasets=None) -> dict:
     from gisroads.imagery.datasets import DATASETS, benchmark_images
     from gisroads.io.quicklook import evaluation_layers, write_quicklook
 
-    default_path = ("papers_model" if imagery_pipeline.DEFAULT_METHOD
-                    == imagery_pipeline.METHOD else
-                    f"prob_context_{imagery_pipeline.PROBABILITY_THRESHOLD}")
+    default_path = ("papers_convnet" if imagery_pipeline.DEFAULT_METHOD
+                    == imagery_pipeline.METHOD else "convnet")
     looks = out / "imagery"
     looks.mkdir(exist_ok=True)
     per_image = {}
@@ -455,13 +470,13 @@ def case_imagery_real(out: Path, data_dir: str, datasets=None) -> dict:
             entry[f"{method}_s"] = seconds
             entry[f"{method}_km"] = float(lines.length.sum() / 1000)
             entry.update({f"stage_{method}_{k}_s": v for k, v in timings.items()
-                          if method in ("papers", "papers_model")})
+                          if method in ("papers", "papers_convnet", "papers_model")})
             layers = [(valid, dict(color="cyan", linewidth=1, label="valid area"))]
             if record.scored:
                 match = dict(buffer_m=record.buffer_m, valid_area=record.valid_area)
                 scores = buffer_metrics(lines, record.truth, **match)
                 entry.update({f"{method}_{k}": getattr(scores, k) for k in _SCORES})
-                if method in ("papers", "papers_model"):
+                if method in ("papers", "papers_convnet", "papers_model"):
                     parts = buffer_metrics(network.qa["road_parts"], record.truth, **match)
                     entry.update({f"{method}_road_parts_{k}": getattr(parts, k)
                                   for k in _SCORES})
@@ -486,7 +501,7 @@ def case_imagery_real(out: Path, data_dir: str, datasets=None) -> dict:
         for key in (*_SCORES, "s"):
             result[f"{method}_mean_{key}"] = float(np.nanmean([e[f"{method}_{key}"]
                                                               for e in scored]))
-    for method in ("papers", "papers_model"):
+    for method in ("papers", "papers_convnet", "papers_model"):
         for key in _SCORES:
             result[f"{method}_road_parts_mean_{key}"] = float(np.nanmean(
                 [e[f"{method}_road_parts_{key}"] for e in scored]))
@@ -580,6 +595,29 @@ def _tile_run(image, *, truth=None, buffer_m=3.0, valid_area=None) -> dict:
     return entry, roads.network
 
 
+def _command_run(image, stem: Path, repeats: int) -> dict:
+    """``gisroads image`` on a tile as a user runs it (a new process: start-up, reading the
+    GeoTIFF, writing the GeoPackage), the fastest of ``repeats`` runs, and its ratio to the
+    numpy reference timed before and after."""
+    import subprocess
+
+    from gisroads.io.raster import write_geotiff
+
+    tif = write_geotiff(stem.with_suffix(".tif"), image)
+    command = [str(Path(sys.executable).parent / "gisroads"), "image", str(tif), "-o",
+               str(stem.with_suffix(".gpkg")), "--json"]
+    runs = []
+    for _ in range(repeats):
+        reference = _reference_s()
+        start = time.perf_counter()
+        subprocess.run(command, check=True, capture_output=True)
+        seconds = time.perf_counter() - start
+        runs.append((seconds, (reference + _reference_s()) / 2))
+    seconds, reference = min(runs)
+    return {"command_s": seconds, "command_reference_s": reference,
+            "command_over_reference": seconds / reference}
+
+
 def case_imagery_tile(out: Path, size_px: int, pixel_m: float, data_dir: str | None = None,
                       repeats: int = 2, loaded: bool = True) -> dict:
     """The default imagery path on 1000 x 1000 tiles on one core, with per-stage seconds
@@ -626,6 +664,7 @@ def case_imagery_tile(out: Path, size_px: int, pixel_m: float, data_dir: str | N
             entry, network = _tile_run(**tile)
             runs.append(entry)
         fastest = min(runs, key=lambda e: e["total_s"])
+        fastest.update(_command_run(tile["image"], out / f"imagery_tile_{name}", repeats))
         result.update({f"{name}_{k}": v for k, v in fastest.items()})
         result.update({f"{name}_{k}_runs": [e[k] for e in runs] for k in
                        ("total_s", "reference_s", "total_over_reference")})
@@ -996,11 +1035,11 @@ def _layer_look(path, record, deleted, lines, title):
         background=record.image, title=title)
 
 
-LAYER_PATHS = {"layer": "trained on the layer, adapted (gisroads image --model)",
-               "layer_plain": "trained on the layer, not adapted (adapt=False)",
-               "layer_unmapped_plain": "trained on the layer with unmapped_probability "
-                                       "0.4, not adapted",
-               "default": "default model, adapted, no layer"}
+LAYER_PATHS = {"network": "the convolutional network fine-tuned on the layer (gisroads "
+                          "train -o model.onnx; gisroads image --model model.onnx)",
+               "layer": "boosted trees trained on the layer, adapted (gisroads train -o "
+                        "model.npz)",
+               "default": "the bundled network, no layer"}
 """Extractions of :func:`case_imagery_layer_training`."""
 _LAYER_SCORES = ("completeness_deleted", "correctness_new", "completeness", "correctness",
                  "quality", "auc_deleted", "auc")
@@ -1055,15 +1094,16 @@ def _layer_table(per_run: dict, osm: dict) -> str:
 
 def case_imagery_layer_training(out: Path, data_dir: str, seeds=LAYER_SEEDS,
                                 share: float = LAYER_DELETE_SHARE) -> dict:
-    """Training from a road layer (the agency's update case, issue 15): on each scored
-    Massachusetts tile and on SpaceNet Paris, per seed, whole roads making ``share`` of the
-    reference length are deleted (:func:`_deleted_roads`), a model is trained on the rest
-    (:data:`LAYER_TRAINING`) and the image extracted with it as ``gisroads image --model``
-    does (``extract_image_roads(image, model=...)``, adapted) and not adapted, and with a
-    model trained with ``unmapped_probability=0.4``, not adapted (:data:`LAYER_PATHS`);
-    :func:`_layer_scores` of each and of the default model's extraction (no layer) against
-    the same deleted roads; seconds of the first training and its adapted extraction. Paris
-    also trained on all its OpenStreetMap lines and scored against them (``osm_*``).
+    """Training from a road layer (the agency's update case): on each scored Massachusetts
+    tile and on SpaceNet Paris, per seed, whole roads making ``share`` of the reference
+    length are deleted (:func:`_deleted_roads`), the convolutional network is fine-tuned on
+    the rest (:func:`gisroads.learn.convnet_training.fine_tune_on_layer`, as ``gisroads
+    train -o model.onnx``) and boosted trees are trained on it (:data:`LAYER_TRAINING`), and
+    the image is extracted with each as ``gisroads image --model`` does
+    (:data:`LAYER_PATHS`); :func:`_layer_scores` of each and of the bundled network's
+    extraction (no layer) against the same deleted roads; seconds of the fine-tuning and its
+    extraction. Paris also trained on all its OpenStreetMap lines and scored against them
+    (``osm_*``).
     Quick-looks of one tile in OUT/imagery/, the tables in OUT/imagery_layer_training.md."""
     from dataclasses import replace
 
@@ -1074,6 +1114,14 @@ def case_imagery_layer_training(out: Path, data_dir: str, seeds=LAYER_SEEDS,
     from gisroads.imagery.pipeline import extract_image_roads
     from gisroads.learn.scores import pixel_auc
     from gisroads.learn.training import train_from_layer
+
+    def fine_tuned(roads, seed):
+        from gisroads.learn.convnet import load_convnet
+        from gisroads.learn.convnet_training import export_onnx, fine_tune_on_layer
+
+        network, metadata = fine_tune_on_layer(image, roads, width_field="width_m",
+                                               seed=seed)
+        return load_convnet(export_onnx(network, looks / "fine_tuned.onnx", metadata))
 
     looks = out / "imagery"
     looks.mkdir(exist_ok=True)
@@ -1087,16 +1135,14 @@ def case_imagery_layer_training(out: Path, data_dir: str, seeds=LAYER_SEEDS,
         default, default_s = _timed(extract_image_roads, image)
         for seed in seeds:
             deleted = _deleted_roads(record.truth, share, seed)
-            model, train_s = _timed(train_from_layer, image, record.truth[~deleted],
-                                    seed=seed, **LAYER_TRAINING)
+            network, train_s = _timed(fine_tuned, record.truth[~deleted], seed)
             runs = {"default": default}
-            runs["layer"], extract_s = _timed(extract_image_roads, image, model=model)
-            runs["layer_plain"] = extract_image_roads(image, model=model, adapt=False)
-            unmapped = train_from_layer(image, record.truth[~deleted], seed=seed,
-                                        unmapped_probability=0.4, **LAYER_TRAINING)
-            runs["layer_unmapped_plain"] = extract_image_roads(image, model=unmapped,
-                                                               adapt=False)
+            runs["network"], extract_s = _timed(extract_image_roads, image, model=network)
+            model, boosted_s = _timed(train_from_layer, image, record.truth[~deleted],
+                                      seed=seed, **LAYER_TRAINING)
+            runs["layer"] = extract_image_roads(image, model=model)
             entry = {"dataset": record.dataset, "train_s": train_s, "extract_s": extract_s,
+                     "boosted_train_s": boosted_s,
                      "default_s": default_s, "deleted_share": float(
                          record.truth.length[deleted].sum() / record.truth.length.sum())}
             for path, run in runs.items():
@@ -1107,7 +1153,7 @@ def case_imagery_layer_training(out: Path, data_dir: str, seeds=LAYER_SEEDS,
             print(record.name, seed, " ".join(f"{k} {v:.3f}" for k, v in entry.items()
                                               if not isinstance(v, str)), flush=True)
             if (record.name, seed) == _LAYER_LOOK:
-                for path in ("layer", "default"):
+                for path in ("network", "layer", "default"):
                     _layer_look(looks / f"{record.name.replace('/', '_')}_{path}.png", record,
                                 deleted, runs[path].network.centrelines,
                                 f"{record.name} {path}: completeness of the deleted roads "
@@ -1116,14 +1162,11 @@ def case_imagery_layer_training(out: Path, data_dir: str, seeds=LAYER_SEEDS,
             model, osm["train_s"] = _timed(train_from_layer, image, record.truth, seed=seeds[0],
                                            **LAYER_TRAINING)
             roads, osm["extract_s"] = _timed(extract_image_roads, image, model=model)
-            plain = extract_image_roads(image, model=model, adapt=False)
-            unmapped = extract_image_roads(image, adapt=False, model=train_from_layer(
-                image, record.truth, seed=seeds[0], unmapped_probability=0.4,
-                **LAYER_TRAINING))
+            network = extract_image_roads(image, model=fine_tuned(record.truth, seeds[0]))
             valid = _burn_shapes([record.valid_area], image)
             band = _burn_shapes(shapely.buffer(record.truth.geometry.values, 3.0), image)
-            for name, run in (("osm", roads), ("osm_plain", plain),
-                              ("osm_unmapped_plain", unmapped), ("default", default)):
+            for name, run in (("osm_network", network), ("osm", roads),
+                              ("default", default)):
                 scores = buffer_metrics(run.network.centrelines, record.truth,
                                         buffer_m=record.buffer_m, valid_area=record.valid_area)
                 osm.update({f"{name}_{k}": getattr(scores, k) for k in _SCORES})
@@ -1131,9 +1174,11 @@ def case_imagery_layer_training(out: Path, data_dir: str, seeds=LAYER_SEEDS,
     tiles = [e for e in per_run.values() if e["dataset"] == "massachusetts"]
     result = {f"massachusetts_mean_{k}": float(np.nanmean([e[k] for e in tiles]))
               for k in tiles[0] if not isinstance(tiles[0][k], str)}
-    result["massachusetts_tile_completeness_deleted"] = {
-        tile: _spread([e["layer_completeness_deleted"] for e in runs])[0]
-        for tile, runs in _runs_per_tile(per_run).items() if tile.startswith("massachusetts")}
+    for path in ("network", "layer"):
+        result[f"massachusetts_tile_{path}_completeness_deleted"] = {
+            tile: _spread([e[f"{path}_completeness_deleted"] for e in runs])[0]
+            for tile, runs in _runs_per_tile(per_run).items()
+            if tile.startswith("massachusetts")}
     result.update({f"paris_{k}": v for k, v in osm.items()})
     table = _layer_table(per_run, osm)
     (out / "imagery_layer_training.md").write_text(table)
@@ -1221,7 +1266,7 @@ def main() -> None:
                              "repeats": 1 if args.quick else 2},
             "imagery_layer_training": {"data_dir": str(Path(__file__).resolve().parents[2]
                                                        / "shared" / "data" / "imagery"),
-                                       "seeds": [0] if args.quick else [0, 1]},
+                                       "seeds": [0] if args.quick else list(LAYER_SEEDS)},
             "vectorize_masks": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"
                                                 / "data" / "imagery")},
             "vectorize_large": {"data_dir": str(Path(__file__).resolve().parents[2] / "shared"

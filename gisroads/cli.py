@@ -240,7 +240,7 @@ def cmd_train(args) -> int:
     result = train_job(args.image, args.roads, args.out, width_field=args.width_field,
                        width_m=args.width, guard_m=args.guard, pixel_m=args.pixel,
                        crs=args.crs, samples=args.samples, seed=args.seed,
-                       progress=_ProgressBar(not args.json))
+                       base=args.base, steps=args.steps, progress=_ProgressBar(not args.json))
     _print(result, args.json)
     return 0
 
@@ -507,9 +507,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = add("image", cmd_image, "extract roads from an aerial image (learned cue; "
                                 "Grote & Rottensteiner)",
             "Extract the road network of an aerial image (RGB, CIR or panchromatic GeoTIFF). "
-            "By default a learned road probability (the bundled model, adapted to the image "
-            "and re-scored by the context model; --model, --context) goes through the "
-            "network stage of 'gisroads vectorize'. With --model "
+            "By default a learned road probability (the bundled convolutional network; "
+            "--model) goes through the network stage of 'gisroads vectorize'. With --model "
             "none, or --method grote-rottensteiner, the papers' pipeline (a NIR band and a "
             "DSM are used when given): normalized-cut over-segmentation, "
             "grouping of segments, road-part shape filtering, linking of road parts with an "
@@ -531,13 +530,16 @@ def build_parser() -> argparse.ArgumentParser:
                                  "e.g. EPSG:32633")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
     p.add_argument("--model", default="default",
-                   help="learned road cue (beyond the papers): 'default' (the bundled model, "
-                        "the default), a model file written by 'gisroads train' (.npz), or "
-                        "'none' (the papers' pipeline alone)")
+                   help="learned road cue (beyond the papers): 'default' (the bundled "
+                        "convolutional network), 'boosted' (the bundled boosted trees, adapted "
+                        "to the image and re-scored by the context model), a model file "
+                        "written by 'gisroads train' (.onnx or .npz), or 'none' (the papers' "
+                        "pipeline alone)")
     p.add_argument("--context", default="default",
-                   help="context model that re-scores the probability from its own shape "
-                        "before the network stage (beyond the papers): 'default' (the "
-                        "bundled one; not for a model trained with 'gisroads train'), a "
+                   help="context model that re-scores the boosted trees' probability from "
+                        "its own shape before the network stage (beyond the papers): "
+                        "'default' (the bundled one; not for the convolutional network or a "
+                        "model trained with 'gisroads train'), a "
                         "file written by scripts/train_context_model.py (.npz), or 'none'")
     p.add_argument("--method", choices=("learned-probability", "grote-rottensteiner"),
                    help="with a model: its probability alone through the network stage "
@@ -552,24 +554,33 @@ def build_parser() -> argparse.ArgumentParser:
     p = add("train", cmd_train, "train a road model on an image from a road layer",
             "Train the learned road cue on your own image from an existing road layer over "
             "it (e.g. last year's road database or OpenStreetMap): roads are rasterised at "
-            "their width, pixels in the core half of a road are road samples, pixels beyond "
-            "the road plus a guard band are non-road samples (the guard absorbs lines a few "
-            "metres off); gradient-boosted trees (scikit-learn) on multiscale features in "
-            "metres. Writes a model archive (.npz) for 'gisroads image --model'. Roads "
-            "missing from the layer fall among the non-road samples, a few per cent of "
-            "them, which the model tolerates.")
+            "their width, pixels in the core half of a road are road, pixels beyond "
+            "the road plus a guard band are non-road (the guard absorbs lines a few "
+            "metres off). An output ending in .onnx fine-tunes the convolutional network "
+            "(needs PyTorch: pip install 'gisroads[train]'); an output ending in .npz "
+            "trains gradient-boosted trees (scikit-learn) on multiscale features in metres. "
+            "Give the output to 'gisroads image --model'. Roads "
+            "missing from the layer fall among the non-road pixels, a few per cent of "
+            "them, which the models tolerate.")
     p.add_argument("image", type=Path, help="GeoTIFF (or PNG/JPEG with --pixel and --crs)")
     p.add_argument("roads", type=Path, help="road centre lines (GeoPackage, GeoJSON, any OGR "
                                             "line layer, any CRS)")
-    p.add_argument("-o", "--out", type=Path, required=True, help="output model (.npz)")
+    p.add_argument("-o", "--out", type=Path, required=True,
+                   help="output model: .onnx (the network fine-tuned) or .npz (boosted trees)")
+    p.add_argument("--base", type=Path,
+                   help="with an .onnx output: the network to start from (default: the "
+                        "bundled one)")
+    p.add_argument("--steps", type=int,
+                   help="with an .onnx output: optimiser steps of 8 crops (default "
+                        "300: a few minutes for a 1500 x 1500 tile on two cores)")
     p.add_argument("--width-field", help="field of the road layer holding each road's width "
                                          "in metres (empty values take --width)")
     p.add_argument("--width", type=_positive, default=_default(train_job, "width_m"),
                    help="road width in metres where no width field or value is given "
                         "(default %(default)g)")
     p.add_argument("--samples", type=int, default=_default(train_job, "samples"),
-                   help="pixels sampled from the image, half of them road (default "
-                        "%(default)s)")
+                   help="with an .npz output: pixels sampled from the image, half of them "
+                        "road (default %(default)s)")
     p.add_argument("--seed", type=int, default=_default(train_job, "seed"),
                    help="random seed (default %(default)s)")
     p.add_argument("--guard", type=float, default=_default(train_job, "guard_m"),
@@ -657,7 +668,7 @@ def check_outputs(args) -> None:
             _check_writable(path, f"{option} {path}")
             continue
         if dest == "out" and args.command == "train":
-            suffixes = (".npz",)
+            suffixes = (".onnx", ".npz")
         if path.suffix.lower() not in suffixes:
             raise ValueError(f"{option} {path}: must end in {' or '.join(suffixes)}")
         if path.is_dir():

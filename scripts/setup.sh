@@ -2,6 +2,7 @@
 # Installs everything gisroads needs on Debian 12, idempotently:
 #   apt   Debian's QGIS and the Debian Python stack QGIS embeds (see README, "Two environments")
 #   venv  .venv: the standalone environment, modern wheels from PyPI
+#   train .venv gains the train extra (PyTorch, CPU build, and onnx) for the training tests
 #   qgis  .venv-qgis: Debian's Python with system site-packages, numpy pinned to Debian's,
 #         shapely 2 built from source against the system GEOS
 # Each step leaves a stamp keyed on the files it depends on, so a second run is quick.
@@ -49,6 +50,15 @@ step_venv() {
   rm -f "$STAMPS"/venv-*; touch "$stamp"
 }
 
+step_train() {
+  local stamp; stamp=$(stamp_for train pyproject.toml scripts/setup.sh)
+  [ -f "$stamp" ] && .venv/bin/python -c "import torch, onnx" 2>/dev/null && return
+  echo "setup: adding the train extra to .venv (PyTorch CPU build, onnx)"
+  # the CPU build by its exact version: a bare 'torch' would bring a CUDA build of several GB
+  .venv/bin/pip install -q "torch==2.13.0" && .venv/bin/pip install -q -e '.[test,train]'
+  rm -f "$STAMPS"/train-*; touch "$stamp"
+}
+
 step_qgis() {
   local stamp; stamp=$(stamp_for qgis pyproject.toml scripts/setup.sh qgis-constraints.txt)
   [ -f "$stamp" ] && [ -x .venv-qgis/bin/python ] && return
@@ -60,13 +70,13 @@ step_qgis() {
   # Only packages Debian lacks come from PyPI; everything linking GEOS/GDAL/PROJ is Debian's,
   # except shapely 2, compiled here against the system GEOS.
   .venv-qgis/bin/pip install -q -c qgis-constraints.txt --no-binary shapely \
-    "shapely>=2" laspy lazrs pytest-qgis
+    "shapely>=2" laspy lazrs pytest-qgis onnxruntime
   .venv-qgis/bin/pip install -q --no-deps --no-build-isolation -e .
   .venv-qgis/bin/python -c "import numpy, shapely, geopandas, rasterio, skimage, qgis.core; \
 assert numpy.__version__.startswith('1.'), numpy.__version__"
   rm -f "$STAMPS"/qgis-*; touch "$stamp"
 }
 
-for step in "${@:-apt venv qgis}"; do
+for step in "${@:-apt venv train qgis}"; do
   for s in $step; do "step_$s"; done
 done

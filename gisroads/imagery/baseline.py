@@ -20,9 +20,12 @@ METHOD = "baseline-threshold-skeleton"
 
 
 def _valid_pixels(data: np.ndarray, nodata) -> np.ndarray:
-    """Pixels with data: not the nodata value in every band, not saturated in every band."""
+    """Pixels with data: finite in every band, not the nodata value in every band, not
+    saturated in every band."""
     valid = np.ones(data.shape[1:], bool)
-    if nodata is not None:
+    if np.issubdtype(data.dtype, np.floating):
+        valid &= np.isfinite(data).all(axis=0)
+    if nodata is not None and not np.isnan(nodata):
         valid &= ~(data == nodata).all(axis=0)
     if np.issubdtype(data.dtype, np.integer):
         valid &= ~(data == np.iinfo(data.dtype).max).all(axis=0)
@@ -81,8 +84,11 @@ def road_colour_mask(image: GeoRaster, *, smooth_m: float = 1.0,
     if not valid.any():
         return valid
     sigma = smooth_m / image.pixel_size
-    bands = np.stack([ndimage.gaussian_filter(band.astype(np.float32), sigma)
-                      for band in data[:3]])
+    # no-data pixels (NaN in a half-empty image) must not bleed into their valid neighbours
+    weight = ndimage.gaussian_filter(valid.astype(np.float32), sigma)
+    bands = np.stack([ndimage.gaussian_filter(np.where(valid, band, 0).astype(np.float32),
+                                              sigma) for band in data[:3]])
+    bands /= np.maximum(weight, 1e-6)
     brightness = bands.mean(axis=0)
     low, high = np.quantile(brightness[valid], brightness_quantiles)
     candidates = valid & (brightness > low) & (brightness <= high)

@@ -100,23 +100,46 @@ each core sees 50 m of context on every side, more than the longest gap edge
 (:data:`gisroads.network.subgraph.MAX_GAP_M`, 40 m); at most a third of a tile."""
 
 
+MODEL_NAMES = ("default", "boosted", "none")
+"""Names ``model`` takes besides a file: ``"default"`` the bundled convolutional network
+(:mod:`gisroads.learn.convnet`), ``"boosted"`` the bundled boosted trees
+(:mod:`gisroads.learn.model`), ``"none"`` no learned cue (the papers' stages alone)."""
+
+
 def resolve_model(model):
-    """A :class:`gisroads.learn.RoadModel` from ``"default"``, a path or a model; None for
-    ``None`` or ``"none"`` (no model)."""
+    """The learned road cue of ``model``: a :class:`gisroads.learn.convnet.ConvNet` for
+    ``"default"`` or an ``.onnx`` file, a :class:`gisroads.learn.RoadModel` for
+    ``"boosted"`` or an ``.npz`` file, None for ``None`` or ``"none"``; a model is returned
+    as it is."""
+    from ..learn.convnet import ConvNet, is_convnet_file, load_convnet
     from ..learn.model import RoadModel, load_model
 
-    if model is None or isinstance(model, RoadModel):
+    if model is None or isinstance(model, (RoadModel, ConvNet)):
         return model
     if isinstance(model, (str, Path)):
-        if str(model).lower() == "none":
+        name = str(model).lower()
+        if name == "none":
             return None
-        if str(model).lower() == "default":
+        if name == "default":
+            return load_convnet()
+        if name == "boosted":
             return load_model()
         if not Path(model).is_file():
-            raise ValueError(f"{model}: no such road model file (give a .npz written by "
-                             "'gisroads train', 'default' or 'none')")
-        return load_model(model)
-    raise TypeError(f"model must be a RoadModel, a path, 'default' or 'none', not {model!r}")
+            raise ValueError(f"{model}: no such road model file (give an .onnx or .npz "
+                             "written by 'gisroads train', or one of "
+                             f"{', '.join(MODEL_NAMES)})")
+        return load_convnet(model) if is_convnet_file(model) else load_model(model)
+    raise TypeError(f"model must be a road model, a path or one of {MODEL_NAMES}, "
+                    f"not {model!r}")
+
+
+def default_threshold(model) -> float:
+    """The probability path's road threshold for ``model``: the convolutional network's
+    own (chosen on held-out tiles, in its metadata), :data:`PROBABILITY_THRESHOLD` for the
+    boosted trees."""
+    from ..learn.convnet import ConvNet
+
+    return model.threshold if isinstance(model, ConvNet) else PROBABILITY_THRESHOLD
 
 
 def resolve_context(context, model):
@@ -134,7 +157,7 @@ def resolve_context(context, model):
     if str(context).lower() == "none":
         return None
     if str(context).lower() == "default":
-        if model is not None and trained_on_road_layer(model):
+        if not isinstance(model, RoadModel) or trained_on_road_layer(model):
             return None
         return load_context_model()
     if not Path(context).is_file():
@@ -147,7 +170,9 @@ def road_probability(image: GeoRaster, model="default", *, adapt: bool = True,
                      context="default", progress: Progress = None) -> GeoRaster:
     """The learned road probability of an image (float32 in [0, 1], NaN where no data).
 
-    ``adapt`` adapts the model to the image from its own most confident pixels first
+    The convolutional network (``"default"``, :func:`gisroads.learn.convnet.convnet_probability`)
+    is applied as it is: ``adapt`` and ``context`` are for the boosted trees
+    (``"boosted"``). There ``adapt`` adapts the model to the image from its own most confident pixels first
     (:func:`gisroads.learn.training.adapted_probability`, needs scikit-learn; without it
     the model is used as it is), taking as road samples only those of road colour
     (:func:`gisroads.imagery.baseline.road_colour_mask`), the naive baseline's cue: the
@@ -158,12 +183,15 @@ def road_probability(image: GeoRaster, model="default", *, adapt: bool = True,
     from importlib.util import find_spec
 
     from ..learn.context import context_probability
+    from ..learn.convnet import ConvNet, convnet_probability
     from ..learn.model import predict_probability
     from .baseline import road_colour_mask
 
     model = resolve_model(model)
     if model is None:
         raise ValueError("no model")
+    if isinstance(model, ConvNet):
+        return convnet_probability(image, model, progress=progress)
     context = resolve_context(context, model)
     first = progress if context is None else scaled(progress, 0.0, 0.85)
     if adapt and find_spec("sklearn") is not None:
@@ -202,7 +230,7 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
                         model="default", adapt: bool = True, context="default",
                         probability: GeoRaster | None = None,
                         method: str | None = None,
-                        probability_threshold: float = PROBABILITY_THRESHOLD,
+                        probability_threshold: float | None = None,
                         tile_px: int = TILE_PX, threads: int | None = 1,
                         progress: Progress = None) -> ImageRoads:
     """The road network of an aerial image (RGB, CIR or panchromatic; NIR and DSM optional).
@@ -225,12 +253,14 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
         :func:`gisroads.network.subgraph.gap_edges`,
         :func:`gisroads.network.subgraph.edge_weights` and
         :func:`gisroads.network.junctions.strings_to_network`.
-    model : RoadModel, str or Path, optional
-        The learned road cue (beyond the papers): ``"default"`` (the bundled model), a model
-        file written by ``gisroads train``, a :class:`gisroads.learn.RoadModel`, or
-        ``None`` / ``"none"`` for the papers' pipeline alone.
+    model : ConvNet, RoadModel, str or Path, optional
+        The learned road cue (beyond the papers): ``"default"`` (the bundled convolutional
+        network), ``"boosted"`` (the bundled boosted trees), a model file written by
+        ``gisroads train`` (``.onnx`` or ``.npz``), a model, or ``None`` / ``"none"`` for
+        the papers' pipeline alone (:func:`resolve_model`).
     adapt : bool
-        Adapt the model to the image from its own confident pixels first (scikit-learn).
+        Adapt boosted trees to the image from its own confident pixels first
+        (scikit-learn).
     context : "default", "none", str, Path or RoadModel
         The context model that re-scores the probability on the probability path
         (:func:`road_probability`, :func:`resolve_context`); the papers' stages take the
@@ -244,8 +274,8 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
         probability alone through :func:`gisroads.network.rasters.raster_to_network` at
         ``probability_threshold``; needs a model). Default: :data:`DEFAULT_METHOD` with a
         model, the papers' stages without one.
-    probability_threshold : float
-        See ``method``; with a model trained on a road layer the mask grows, by
+    probability_threshold : float, optional
+        See ``method``; by default the model's own (:func:`default_threshold`). With a model trained on a road layer the mask grows, by
         hysteresis, into the pixels connected to it at :data:`LAYER_LOW_THRESHOLD` of it.
     tile_px : int
         The papers' stages run tile by tile on an image with more than ``2 * tile_px`` rows
@@ -271,6 +301,16 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
                         context=context, probability=probability, method=method,
                         probability_threshold=probability_threshold, tile_px=tile_px,
                         progress=progress)
+
+
+def _model_name(model) -> str | None:
+    """How the summary names a model: the convolutional network's file name, or
+    ``"boosted"``."""
+    from ..learn.convnet import ConvNet
+
+    if model is None:
+        return None
+    return model.path.name if isinstance(model, ConvNet) else "boosted"
 
 
 class _StageClock:
@@ -299,6 +339,8 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
     timings = {}
     lap = _StageClock(timings)
     model = resolve_model(model)
+    if probability_threshold is None:
+        probability_threshold = default_threshold(model)
     method = method or (DEFAULT_METHOD if probability is not None or model is not None
                         else METHOD)
     if method not in (METHOD, PROBABILITY_METHOD):
@@ -317,10 +359,11 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
     if method == PROBABILITY_METHOD:
         if probability is None:
             raise ValueError(f"method {PROBABILITY_METHOD!r} needs a model")
+        from ..learn.model import RoadModel
         from ..learn.training import trained_on_road_layer
         from ..network.rasters import raster_to_network
         low = (LAYER_LOW_THRESHOLD * probability_threshold
-               if model is not None and trained_on_road_layer(model) else None)
+               if isinstance(model, RoadModel) and trained_on_road_layer(model) else None)
         network = raster_to_network(probability, threshold=probability_threshold,
                                     method=PROBABILITY_METHOD,
                                     part_options={"low_threshold": low},
@@ -331,7 +374,8 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
         return ImageRoads(network, {
             "timings_s": timings, "method": method, "probability": probability,
             "cues": {"cues": "model", "model": True}, "context_model": context is not None,
-            "low_threshold": low,
+            "low_threshold": low, "threshold": probability_threshold,
+            "model": _model_name(model),
             "gap_edges": len(network.qa["gap_edges"]),
             "roads": len(network.centrelines)})
     base = 0.15 if "probability" in timings else 0.0

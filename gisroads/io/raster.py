@@ -13,6 +13,7 @@ import numpy as np
 import rasterio
 from affine import Affine
 from pyproj import CRS
+from rasterio.enums import ColorInterp
 from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 
 from ..errors import GisroadsError
@@ -48,6 +49,13 @@ def _opened(path):
 
 def _crs(rio_crs) -> CRS | None:
     return None if rio_crs is None else CRS.from_user_input(rio_crs.to_wkt())
+
+
+def _is_mask(band: np.ndarray) -> bool:
+    """Whether a band marked alpha is a mask: nearly all of it (95 %) transparent or opaque,
+    the rest anti-aliased edges. GDAL marks the fourth band of any 4-band 8-bit GeoTIFF as
+    alpha, a near-infrared band included."""
+    return bool(((band == 0) | (band == band.max())).mean() >= 0.95)
 
 
 def read_raster(path, *, pixel_size: float | None = None, crs=None,
@@ -86,8 +94,19 @@ def read_raster(path, *, pixel_size: float | None = None, crs=None,
         with _opened(path) as src:
             data = src.read(bands)
             transform, file_crs, nodata = src.transform, _crs(src.crs), src.nodata
+            alpha = [k for k, kind in enumerate(src.colorinterp) if kind == ColorInterp.alpha]
     except RasterioIOError as err:
         raise RasterError(f"{path}: not a readable raster ({err})") from None
+    if alpha and bands is None and _is_mask(data[alpha[0]]):
+        # an alpha band is the image's mask, not a colour: transparent pixels are no data,
+        # and so are those with the nodata value in every colour band, as without alpha
+        empty = data[alpha[0]] < data[alpha[0]].max() / 2
+        data = np.delete(data, alpha, axis=0)
+        if nodata is not None and not np.isnan(nodata):
+            empty |= (data == nodata).all(axis=0)
+        data = data.astype(np.float32)
+        data[:, empty] = np.nan
+        nodata = float("nan")
     georeferenced = transform != Affine.identity() and file_crs is not None
     if pixel_size is not None or crs is not None:
         if pixel_size is None or crs is None:

@@ -7,8 +7,9 @@ from pathlib import Path
 import geopandas as gpd
 
 from ..errors import GisroadsError
-from ..imagery.pipeline import PROBABILITY_THRESHOLD, extract_image_roads, resolve_model
+from ..imagery.pipeline import extract_image_roads, resolve_model
 from ..io.raster import read_raster, write_geotiff
+from ..learn.convnet import FINE_TUNE_STEPS
 from ..learn.model import save_model, with_metadata
 from ..learn.training import train_from_layer
 from ..progress import Progress, report, scaled
@@ -21,7 +22,7 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
               crs=None, quicklook=None, model="default", context="default",
               probability_path=None,
               method: str | None = None, n_segments: int | None = None,
-              probability_threshold: float = PROBABILITY_THRESHOLD,
+              probability_threshold: float | None = None,
               adapt: bool = stage_default(extract_image_roads, "adapt"),
               threads: int | None = stage_default(extract_image_roads, "threads"),
               road_part_criteria: dict | None = None, gap_options: dict | None = None,
@@ -65,7 +66,9 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     result = {**network_summary(out_path, network), "cues": roads.report["cues"]["cues"],
               "method": roads.report["method"], "timings_s": roads.report["timings_s"],
               "context_model": roads.report.get("context_model", False),
-              "low_threshold": roads.report.get("low_threshold")}
+              "low_threshold": roads.report.get("low_threshold"),
+              "model": roads.report.get("model"),
+              "threshold": roads.report.get("threshold")}
     if probability_path is not None:
         result["probability"] = write_geotiff(probability_path, roads.report["probability"],
                                               band_names=["road_probability"])
@@ -86,8 +89,14 @@ def train_job(image_path, roads_path, out_path, *, width_field: str | None = Non
               pixel_m: float | None = None, crs=None,
               samples: int = stage_default(train_from_layer, "samples"),
               seed: int = stage_default(train_from_layer, "seed"),
+              base=None, steps: int | None = None,
               progress: Progress = None) -> dict:
     """Train a road model on an image from a road layer over it (the agency's update case).
+
+    An ``out_path`` ending in ``.onnx`` fine-tunes the convolutional network (``base``, the
+    bundled one by default, for ``steps`` optimiser steps:
+    :func:`gisroads.learn.convnet_training.fine_tune_on_layer`; needs the ``train`` extra,
+    PyTorch); any other suffix trains boosted trees, as follows.
 
     Roads (any OGR line layer or a GeoDataFrame, any CRS; a gisroads GeoPackage's
     road_centrelines) are
@@ -108,6 +117,11 @@ def train_job(image_path, roads_path, out_path, *, width_field: str | None = Non
                          f"{', '.join(c for c in roads.columns if c != 'geometry')})")
     if width_m <= 0 or guard_m < 0:
         raise GisroadsError("the width must be positive and the guard band at least 0 m")
+    if Path(out_path).suffix.lower() == ".onnx":
+        return _fine_tune_job(image, roads, out_path, image_path=image_path,
+                              roads_path=roads_path, width_field=width_field, width_m=width_m,
+                              guard_m=guard_m, seed=seed, base=base, steps=steps,
+                              progress=progress)
     try:
         import sklearn  # noqa: F401  (optional: checked here to say what is missing)
     except ImportError:
@@ -124,4 +138,30 @@ def train_job(image_path, roads_path, out_path, *, width_field: str | None = Non
     report(progress, 1.0, "done")
     return {"model": path, "samples": model.metadata["samples"],
             "trees": len(model.roots), "road_share": model.metadata["calibrated_road_share"],
+            "roads": len(roads)}
+
+
+def _fine_tune_job(image, roads, out_path, *, image_path, roads_path, width_field, width_m,
+                   guard_m, seed, base, steps, progress) -> dict:
+    """The convolutional network fine-tuned on ``image`` with ``roads`` as labels, written
+    as ONNX to ``out_path`` (see :func:`train_job`)."""
+    try:
+        from ..learn.convnet_training import export_onnx, fine_tune_on_layer
+    except ImportError:
+        raise GisroadsError("fine-tuning the road network needs PyTorch: "
+                            "pip install 'gisroads[train]' (or train boosted trees: "
+                            "-o model.npz)") from None
+    steps = FINE_TUNE_STEPS if steps is None else steps
+    if steps < 1:
+        raise GisroadsError("the number of fine-tuning steps must be at least 1")
+    model, metadata = fine_tune_on_layer(image, roads, model=base, width_field=width_field,
+                                         default_width_m=width_m, guard_m=guard_m,
+                                         steps=steps, seed=seed,
+                                         progress=scaled(progress, 0.0, 0.95))
+    metadata = {**metadata, "image": Path(image_path).name, "width_field": width_field,
+                "roads": (Path(roads_path).name if not isinstance(roads_path, gpd.GeoDataFrame)
+                          else "layer")}
+    path = export_onnx(model, out_path, metadata)
+    report(progress, 1.0, "done")
+    return {"model": path, "steps": steps, "road_share": metadata["road_share"],
             "roads": len(roads)}

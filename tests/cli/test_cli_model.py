@@ -110,14 +110,14 @@ def test_model_errors_are_one_line_and_write_nothing(scene, tmp_path):
 
 
 def test_context_model_on_by_default_and_off_with_none(scene, tmp_path):
-    """The bundled model's probability is re-scored by the context model unless --context
-    none; the two probability rasters differ, each is a probability."""
+    """The bundled boosted trees' probability is re-scored by the context model unless
+    --context none; the two probability rasters differ, each is a probability."""
     folder, _ = scene
     summaries, rasters = {}, {}
     for context in ("default", "none"):
         result = gisroads("image", folder / "image.tif", "-o", tmp_path / f"{context}.gpkg",
-                          "--context", context, "--probability", tmp_path / f"{context}.tif",
-                          "--json")
+                          "--model", "boosted", "--context", context,
+                          "--probability", tmp_path / f"{context}.tif", "--json")
         assert result.returncode == 0, result.stderr
         summaries[context] = json.loads(result.stdout)
         rasters[context] = read_raster(tmp_path / f"{context}.tif").data[0]

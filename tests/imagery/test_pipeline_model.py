@@ -62,8 +62,13 @@ def test_a_good_probability_in_the_papers_stages_and_alone(scene_rgb):
 
 def test_models_by_name_file_and_errors(scene_rgb, tmp_path):
     _, rgb, _ = scene_rgb
+    from gisroads.learn.convnet import ConvNet
+
     assert resolve_model(None) is None and resolve_model("none") is None
-    default = resolve_model("default")
+    assert isinstance(resolve_model("default"), ConvNet)
+    assert resolve_model(resolve_model("default").path).metadata == \
+        resolve_model("default").metadata
+    default = resolve_model("boosted")
     assert isinstance(default, RoadModel)
     path = save_model(default, tmp_path / "m.npz")
     assert resolve_model(path).metadata == default.metadata
@@ -81,8 +86,8 @@ def test_models_by_name_file_and_errors(scene_rgb, tmp_path):
 def test_a_layer_trained_model_follows_its_faint_roads(scene_rgb):
     """With a model trained on the image's road layer the probability path's mask grows
     into the faint pixels joined to a confident road (hysteresis at
-    ``LAYER_LOW_THRESHOLD`` of the threshold); with the bundled model it stops where the
-    probability falls under the threshold."""
+    ``LAYER_LOW_THRESHOLD`` of the threshold); with the bundled boosted trees it stops where
+    the probability falls under the threshold."""
     from dataclasses import replace
 
     from gisroads.learn.training import ROAD_LAYER
@@ -94,7 +99,7 @@ def test_a_layer_trained_model_follows_its_faint_roads(scene_rgb):
     probability[band, : cols // 2] = 0.9
     probability[band, cols // 2:] = 0.32  # above 0.7 * 0.4, under 0.4
     probability = GeoRaster(probability, rgb.transform, rgb.crs)
-    default = resolve_model("default")
+    default = resolve_model("boosted")
     layer = replace(default, metadata={**default.metadata, "trained_on": ROAD_LAYER})
     km = {}
     for name, model in (("default", default), ("layer", layer)):
@@ -108,10 +113,10 @@ def test_a_layer_trained_model_follows_its_faint_roads(scene_rgb):
     assert km["default"] < 0.6 * extent_km
 
 
-def test_default_model_runs_and_reports_its_probability(scene_rgb):
+def test_boosted_model_runs_and_reports_its_probability(scene_rgb):
     scene, rgb, surface = scene_rgb
     crop = GeoRaster(rgb.data[:, :300, :300], rgb.transform, rgb.crs)
-    roads = extract_image_roads(crop, model="default", adapt=False)
+    roads = extract_image_roads(crop, model="boosted", adapt=False)
     probability = roads.report["probability"]
     assert probability.shape == crop.shape and probability.data.dtype == np.float32
     assert "probability" in roads.report["timings_s"]
@@ -143,7 +148,7 @@ def test_adaptation_keeps_road_coloured_samples_on_a_real_tile():
     record = load_massachusetts(stems=["10228660_15"])[0].crop(0, 0, 700, 700)
     image = replace(record.image, nodata=255)
     road = np.asarray(record.truth_mask.data, bool)
-    default = pixel_auc(road_probability(image, context=None).data, road)
+    default = pixel_auc(road_probability(image, "boosted", context=None).data, road)
     unfiltered = pixel_auc(predict_probability(
         image, adapt_to_image(image, load_model())).data, road)
     # measured 0.887 against 0.801 (0.813 with the former 4 % / half-weight adaptation)
@@ -152,8 +157,8 @@ def test_adaptation_keeps_road_coloured_samples_on_a_real_tile():
 
 
 def test_context_stage_in_the_default_path(scene_rgb, tmp_path):
-    """The default path re-scores the adapted probability with the bundled context model;
-    a model trained on a road layer keeps its own probability."""
+    """The boosted trees' path re-scores the adapted probability with the bundled context
+    model; a model trained on a road layer keeps its own probability."""
     from gisroads.imagery.pipeline import resolve_context, road_probability
     from gisroads.learn.context import context_probability, load_context_model
     from gisroads.learn.model import with_metadata
@@ -161,18 +166,20 @@ def test_context_stage_in_the_default_path(scene_rgb, tmp_path):
     pytest.importorskip("sklearn")
     _, rgb, _ = scene_rgb
     crop = GeoRaster(rgb.data[:, :240, :240], rgb.transform, rgb.crs)
-    first = road_probability(crop, context=None)
-    np.testing.assert_array_equal(road_probability(crop).data,
+    first = road_probability(crop, "boosted", context=None)
+    np.testing.assert_array_equal(road_probability(crop, "boosted").data,
                                   context_probability(first).data)
     assert resolve_context("none", None) is None and resolve_context(None, None) is None
     bundled = load_context_model()
-    assert resolve_context("default", resolve_model("default")).metadata == bundled.metadata
-    layer_model = with_metadata(resolve_model("default"), trained_on="road layer")
+    assert resolve_context("default", resolve_model("boosted")).metadata == bundled.metadata
+    # the convolutional network is not re-scored: the context model learnt the trees' errors
+    assert resolve_context("default", resolve_model("default")) is None
+    layer_model = with_metadata(resolve_model("boosted"), trained_on="road layer")
     assert resolve_context("default", layer_model) is None
     path = save_model(bundled, tmp_path / "context.npz")
     assert resolve_context(path, layer_model).metadata == bundled.metadata
     with pytest.raises(ValueError, match="other features"):
-        resolve_context(save_model(resolve_model("default"), tmp_path / "road.npz"), None)
+        resolve_context(save_model(resolve_model("boosted"), tmp_path / "road.npz"), None)
 
 
 def test_context_stage_raises_correctness_on_a_real_tile():
@@ -188,10 +195,10 @@ def test_context_stage_raises_correctness_on_a_real_tile():
     pytest.importorskip("sklearn")
     record = load_massachusetts(stems=["10078660_15"])[0].crop(0, 0, 700, 700)
     image = replace(record.image, nodata=255)
-    first = road_probability(image, context=None)
+    first = road_probability(image, "boosted", context=None)
     scores = {}
     for name, probability in (("first", first), ("context", context_probability(first))):
-        roads = extract_image_roads(image, probability=probability)
+        roads = extract_image_roads(image, probability=probability, model="boosted")
         scores[name] = buffer_metrics(roads.network.centrelines, record.truth,
                                       buffer_m=record.buffer_m, valid_area=record.valid_area)
     # measured correctness 0.603 -> 0.674, completeness 0.709 -> 0.714, quality 0.487 -> 0.531

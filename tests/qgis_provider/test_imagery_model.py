@@ -49,12 +49,13 @@ def test_train_errors_are_processing_errors(qgis_process, scene_dir, tmp_path):
 
 
 def test_context_model_can_be_switched_off(qgis_process, scene_dir, tmp_path):
-    """The bundled model's probability is re-scored by the context model unless USE_CONTEXT
-    is off: the two probability rasters differ."""
+    """The bundled boosted trees' probability is re-scored by the context model unless
+    USE_CONTEXT is off: the two probability rasters differ."""
     rasters = {}
     for use in ("true", "false"):
         result = qgis_process.run("imageryroadnetwork", INPUT=scene_dir / "image.tif",
-                                  USE_CONTEXT=use, PROBABILITY=tmp_path / f"p_{use}.tif",
+                                  BUNDLED_MODEL=1, USE_CONTEXT=use,
+                                  PROBABILITY=tmp_path / f"p_{use}.tif",
                                   OUTPUT=tmp_path / f"roads_{use}.gpkg")
         assert "model" in result["CUES"]
         rasters[use] = read_raster(tmp_path / f"p_{use}.tif").data[0]
@@ -84,3 +85,38 @@ def test_cancel_while_training_writes_no_model(run_algorithm, tmp_path):
             "OUTPUT": str(tmp_path / "model.npz")}, feedback)
     assert 20 < max(percents) < 80
     assert not (tmp_path / "model.npz").exists()
+
+
+def test_the_default_model_is_the_network(qgis_process, scene_dir, tmp_path):
+    """With no model file the bundled convolutional network gives the probability: it
+    finds the scene's roads, and its probability differs from the boosted trees'."""
+    rasters = {}
+    for choice in (0, 1):
+        result = qgis_process.run("imageryroadnetwork", INPUT=scene_dir / "image.tif",
+                                  BUNDLED_MODEL=choice, PROBABILITY=tmp_path / f"p{choice}.tif",
+                                  OUTPUT=tmp_path / f"roads{choice}.gpkg")
+        assert "model" in result["CUES"] and result["ROADS"] > 0
+        rasters[choice] = read_raster(tmp_path / f"p{choice}.tif").data[0]
+    polygons = read_layer(scene_dir / "truth.gpkg", "road_polygons")
+    road = rasterio.features.rasterize(((g, 1) for g in polygons.geometry),
+                                       out_shape=rasters[0].shape,
+                                       transform=read_raster(tmp_path / "p0.tif").transform
+                                       ).astype(bool)
+    assert pixel_auc(rasters[0], road) > 0.9
+    assert np.nanmax(np.abs(rasters[0] - rasters[1])) > 0.1
+
+
+def test_fine_tuning_without_torch_is_one_clear_error(qgis_process, scene_dir, tmp_path):
+    """QGIS's Python has no PyTorch: an .onnx output says how to get it, writes nothing."""
+    try:
+        import torch  # noqa: F401
+        pytest.skip("PyTorch is installed here")
+    except ImportError:
+        pass
+    result = qgis_process("run", "gisroads:trainroadmodel", "--",
+                          f"IMAGE={scene_dir / 'image.tif'}",
+                          f"ROADS={scene_dir / 'truth.gpkg'}|layername=road_centrelines",
+                          f"OUTPUT={tmp_path / 'm.onnx'}", check=False)
+    assert result.returncode == 1
+    assert "gisroads[train]" in result.stdout + result.stderr
+    assert not (tmp_path / "m.onnx").exists()
