@@ -396,8 +396,8 @@ def _imagery_paths(record):
     # Massachusetts declares its white fill as no-data, as a user gives it to the model
     model_image = (replace(record.image, nodata=255) if record.dataset == "massachusetts"
                    else record.image)
-    network = load_convnet()
-    convnet, convnet_s = _timed(convnet_probability, model_image, network)
+    road_network_model = load_convnet()
+    convnet, convnet_s = _timed(convnet_probability, model_image, road_network_model)
     model = load_model()
     probability, plain_s = _timed(predict_probability, model_image, model)
     adapted, adapted_s = _timed(road_probability, model_image, model, context=None)
@@ -425,7 +425,7 @@ def _imagery_paths(record):
                                 method="grote-rottensteiner")
         runs[name] = (roads.network, seconds + extra, roads.report["timings_s"], roads)
     for name, raster, extra, thresholds in (
-            ("convnet", convnet, convnet_s, (network.threshold, 0.3, 0.4, 0.5)),
+            ("convnet", convnet, convnet_s, (road_network_model.threshold, 0.3, 0.4, 0.5)),
             ("prob", probability, plain_s, (0.4,)),
             ("prob_adapted", adapted, adapted_s, (0.4,)),
             ("prob_context", context, adapted_s + context_s, (0.3, 0.4, 0.5))):
