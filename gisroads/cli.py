@@ -572,7 +572,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "bundled one)")
     p.add_argument("--steps", type=int,
                    help="with an .onnx output: optimiser steps of 8 crops (default "
-                        "300: a few minutes for a 1500 x 1500 tile on two cores)")
+                        "150: about two minutes for a 1500 x 1500 tile on two cores)")
     p.add_argument("--width-field", help="field of the road layer holding each road's width "
                                          "in metres (empty values take --width)")
     p.add_argument("--width", type=_positive, default=_default(train_job, "width_m"),

@@ -29,6 +29,7 @@ REQUIREMENTS = [
     ("laspy", "laspy", "2.4"),
     ("lazrs", "lazrs", "0.5"),
     ("matplotlib", "matplotlib", "3.6"),
+    ("onnxruntime", "onnxruntime", "1.16"),
 ]
 
 

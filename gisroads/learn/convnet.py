@@ -33,10 +33,13 @@ TILE_PX = 1024
 """Side of the tiles the network sees, working pixels."""
 OVERLAP_PX = 64
 """Overlap of neighbouring tiles, working pixels: their predictions are blended across it."""
-FINE_TUNE_STEPS = 300
+FINE_TUNE_STEPS = 150
 """Optimiser steps of :func:`gisroads.learn.convnet_training.fine_tune_on_layer` (8 crops of
-224 working pixels each): about 50 passes over a 1500 x 1500 tile at 1 m, a few minutes on
-two CPU cores."""
+224 working pixels each): about 25 passes over a 1500 x 1500 tile at 1 m, about two minutes
+on two CPU cores. On a Massachusetts tile with 30 % of its roads deleted from the layer
+(seed 0), 150 steps with road at the layer's full width found 0.551 of the deleted roads
+(correctness on all roads 0.829), 300 steps with the core half as road 0.330 (0.824); the
+bundled network without the layer 0.653 (0.695)."""
 
 
 @dataclass(frozen=True)

@@ -403,16 +403,19 @@ def _working_grid(image, pixel_m: float):
 
 def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
                        width_field: str | None = None, default_width_m: float = 6.0,
-                       guard_m: float = 5.0, core_fraction: float = 0.5,
-                       steps: int = FINE_TUNE_STEPS, learning_rate: float = 1e-3,
-                       seed: int = 0, progress: Progress = None) -> tuple[RoadUNet, dict]:
+                       guard_m: float = 5.0, core_fraction: float = 1.0,
+                       steps: int = FINE_TUNE_STEPS, learning_rate: float = 3e-4,
+                       unmapped_probability: float | None = 0.3, seed: int = 0,
+                       progress: Progress = None) -> tuple[RoadUNet, dict]:
     """Fine-tune the convolutional road model on an image with a road layer as labels (the
     road-database update case).
 
     The layer is rasterised on the model's working grid as for the boosted trees
     (:func:`gisroads.learn.training.layer_labels`): road within ``core_fraction`` of each
-    road's half-width of its line, non-road beyond half the width plus ``guard_m`` (lines a
-    few metres off), the band between left out of the loss.
+    road's half-width of its line (the whole width by default: the network draws road
+    surfaces, and taught the core half it learns to miss roads), non-road beyond half the
+    width plus ``guard_m`` (lines a few metres off), the band between left out of the
+    loss.
 
     Parameters
     ----------
@@ -427,6 +430,14 @@ def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
     steps : int
         Optimiser steps (:data:`FINE_TUNE_STEPS`); batch-norm statistics stay the base
         model's.
+    learning_rate : float
+        Peak of the one-cycle schedule: low, so that the model stays near the base.
+    unmapped_probability : float or None
+        Pixels off the layer that the base model gives at least this probability (and
+        their 2-pixel neighbourhood) are left out of the loss, not taught as non-road: a
+        layer to update lacks roads, and a network taught that its missing roads are
+        background learns to miss them. None teaches every pixel off the layer as
+        non-road.
     seed : int
 
     Returns
@@ -444,14 +455,21 @@ def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
     positive, negative = layer_labels(grid, roads, width_m=width_m, width_field=width_field,
                                       default_width_m=default_width_m, guard_m=guard_m,
                                       core_fraction=core_fraction)
-    labelled = valid & (positive | negative)
     if not (positive & valid).any():
         raise ValueError("no road of the layer lies on the image")
-    tile = LabelledTile(np.clip(bands, -0.5, 1.5), positive & valid, labelled, "layer")
+    bands = np.clip(bands, -0.5, 1.5)
+    if unmapped_probability is not None:
+        report(progress, 0.02, "finding the roads the layer lacks")
+        seen = predict_tiles(base, [LabelledTile(bands, positive, valid, "layer")])[0]
+        unmapped = ndimage.binary_dilation(seen >= unmapped_probability, iterations=2)
+        negative = negative & ~unmapped
+    labelled = valid & (positive | negative)
+    tile = LabelledTile(bands, positive & valid, labelled, "layer")
     tuned = train_convnet([tile], steps=steps, batch=8, crop_px=224,
                           learning_rate=learning_rate, seed=seed, model=base,
                           freeze_batchnorm=True, scale_range=(0.8, 1.25), nodata_share=0.0,
                           progress=progress)
     road_share = float(positive[valid].mean())
     return tuned, {**metadata, "trained_on": ROAD_LAYER, "road_share": round(road_share, 4),
-                   "fine_tune_steps": steps, "fine_tune_seed": seed}
+                   "fine_tune_steps": steps, "fine_tune_seed": seed,
+                   "unmapped_probability": unmapped_probability}
