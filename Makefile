@@ -8,13 +8,17 @@ export QT_QPA_PLATFORM := offscreen
 # 2 cores: OpenBLAS threads thrash under load (an NCut went from 4 s to 29 s)
 export OPENBLAS_NUM_THREADS := 1
 
-.PHONY: demo test test-core test-core-qgis test-qgis plugin bench bench-city setup setup-core
+.PHONY: demo test test-core test-core-qgis test-qgis plugin bench bench-city setup setup-core setup-bench
 
 setup:
 	@scripts/setup.sh apt venv train qgis
 
 setup-core:
 	@scripts/setup.sh apt venv
+
+# the benchmarks fine-tune the road network: the train extra (PyTorch) as well
+setup-bench:
+	@scripts/setup.sh apt venv train
 
 demo: setup-core
 	$(VENV)/gisroads demo --out out/demo
@@ -37,7 +41,7 @@ plugin: dist/gisroads_qgis.zip
 dist/gisroads_qgis.zip: scripts/build_plugin.sh metadata.txt $(shell git ls-files -co --exclude-standard gisroads processing_provider styles 2>/dev/null)
 	@scripts/build_plugin.sh
 
-bench: setup-core
+bench: setup-bench
 	$(VENV)/python bench/run.py --out out/bench
 
 ## bench-city: a synthetic city of 1 and 4 km² end to end with 1 and 2 workers (minutes);
