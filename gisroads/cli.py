@@ -1,9 +1,10 @@
 """The ``gisroads`` command: one subcommand per job, progress on stderr, ``--json`` for scripts.
 
 Errors in the input (unreadable or empty files, missing georeferencing, bad values) print one
-line, ``gisroads: error: ...``, and exit with status 2; nothing is written. Warnings (no road
-found: the outputs hold empty layers) print ``gisroads: warning: ...`` after the command's
-output, which still exits 0.
+line, ``gisroads: error: ...``, and exit with status 2; nothing is written. Any other exception
+is a bug and keeps its traceback (see :mod:`gisroads.errors`). Warnings (no road found: the
+outputs hold empty layers) print ``gisroads: warning: ...`` after the command's output, which
+still exits 0.
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
+from .errors import INPUT_ERRORS, GisroadsError, reported_warnings
 from .progress import Cancelled, to_json
 
 EPILOG = "Distances are in metres. Outputs are written in the input's CRS."
@@ -183,7 +185,7 @@ def _metres(text: str) -> tuple[float, ...]:
     from .jobs import parse_metres
     try:
         return parse_metres(text)
-    except ValueError as err:
+    except GisroadsError as err:
         raise argparse.ArgumentTypeError(str(err)) from None
 
 
@@ -664,15 +666,15 @@ def check_outputs(args) -> None:
         option = "-o/--out" if dest == "out" else "--" + dest.replace("_", "-")
         if suffixes is None or dest == "out" and args.command in _FOLDER_OUT:
             if path.exists() and not path.is_dir():
-                raise ValueError(f"{option} {path}: is a file; give a folder")
+                raise GisroadsError(f"{option} {path}: is a file; give a folder")
             _check_writable(path, f"{option} {path}")
             continue
         if dest == "out" and args.command == "train":
             suffixes = (".onnx", ".npz")
         if path.suffix.lower() not in suffixes:
-            raise ValueError(f"{option} {path}: must end in {' or '.join(suffixes)}")
+            raise GisroadsError(f"{option} {path}: must end in {' or '.join(suffixes)}")
         if path.is_dir():
-            raise ValueError(f"{option} {path}: is a folder; give a file name")
+            raise GisroadsError(f"{option} {path}: is a folder; give a file name")
         _check_writable(path.parent, f"{option} {path}")
 
 
@@ -683,9 +685,9 @@ def _check_writable(folder: Path, what: str) -> None:
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent
     if not existing.is_dir():
-        raise ValueError(f"{what}: cannot make the folder {folder}: {existing} is a file")
+        raise GisroadsError(f"{what}: cannot make the folder {folder}: {existing} is a file")
     if not os.access(existing, os.W_OK | os.X_OK):
-        raise ValueError(f"{what}: cannot write in {existing}: permission denied")
+        raise GisroadsError(f"{what}: cannot write in {existing}: permission denied")
 
 
 def _error_text(err: Exception, args) -> str:
@@ -718,7 +720,6 @@ def _cancel_on_sigterm():
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    from .errors import INPUT_ERRORS, reported_warnings
     notes = []
     _ProgressBar.json_lines = getattr(args, "progress_json", False)
     _ProgressBar.terminated = False

@@ -1,13 +1,15 @@
 """What gisroads reports beside its results: the errors of inputs it cannot work on, and
 warnings about valid but notable outcomes.
 
-Errors: :class:`GisroadsError` (a ValueError) is the family of gisroads' own input errors:
-:class:`~gisroads.io.las.LasError`, :class:`~gisroads.io.raster.RasterError` (and its
-:class:`~gisroads.io.raster.NotGeoreferencedError`), :class:`MissingFileError`. The stages'
-argument checks raise a plain ValueError, their documented contract. The command line and
-the QGIS algorithms catch :data:`INPUT_ERRORS`, each in one place, and report them as one
-line (``gisroads: error: ...``, a QgsProcessingException); anything else is a bug and keeps
-its traceback.
+Errors: :class:`GisroadsError` is the family of gisroads' own errors: every input or
+argument gisroads refuses on purpose (a stage's argument check, a file missing, unreadable
+or of the wrong kind) raises it or a subclass (:class:`~gisroads.io.las.LasError`,
+:class:`~gisroads.io.raster.RasterError` and its
+:class:`~gisroads.io.raster.NotGeoreferencedError`, :class:`MissingFileError`). It is a
+ValueError, so the stages' documented contract, "raises ValueError", holds. The command
+line and the QGIS algorithms catch :data:`INPUT_ERRORS`, each in one place, and report
+them as one line (``gisroads: error: ...``, a QgsProcessingException); anything else,
+such as a ValueError raised inside numpy or shapely, is a bug and keeps its traceback.
 
 Warnings: the command line prints a :class:`GisroadsWarning` as one line,
 ``gisroads: warning: ...``, and the QGIS algorithms push it to their feedback; Python
@@ -22,18 +24,19 @@ from typing import Callable, Iterator
 
 
 class GisroadsError(ValueError):
-    """An input gisroads cannot work on (a file missing, unreadable or of the wrong kind), or
-    a job left with nothing it could write."""
+    """An input gisroads cannot work on (a file missing, unreadable or of the wrong kind), an
+    argument a stage refuses, or a job left with nothing it could write."""
 
 
 class MissingFileError(GisroadsError, FileNotFoundError):
     """An input file that does not exist (also a FileNotFoundError)."""
 
 
-INPUT_ERRORS = (ValueError, FileNotFoundError)
+INPUT_ERRORS = (GisroadsError, FileNotFoundError)
 """What the command line and the QGIS algorithms report as a one-line error: the
-:class:`GisroadsError` family and the ValueError of a stage's argument check (both
-ValueErrors), and a file a library found missing on its own."""
+:class:`GisroadsError` family, and a file a library found missing on its own (an input
+that went away, a path inside a list): a user's error, not a bug. Any other exception,
+a plain ValueError included, keeps its traceback."""
 
 
 class GisroadsWarning(UserWarning):

@@ -24,6 +24,7 @@ from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+from .errors import GisroadsError
 from .progress import Progress, report
 
 
@@ -99,8 +100,8 @@ def worker_python() -> str:
     for candidate in filter(None, candidates):
         if os.access(candidate, os.X_OK) and _installation(candidate) == ours:
             return candidate
-    raise ValueError(f"no interpreter of this Python ({ours}) found to start Dask workers "
-                     f"with (tried {', '.join(filter(None, candidates))}); use one worker")
+    raise GisroadsError(f"no interpreter of this Python ({ours}) found to start Dask workers "
+                        f"with (tried {', '.join(filter(None, candidates))}); use one worker")
 
 
 @contextlib.contextmanager
@@ -216,7 +217,7 @@ def for_each_result(func: Callable, items: Sequence, on_result: Callable, *, wor
     """
     items = list(items)
     if workers < 1:
-        raise ValueError(f"workers must be at least 1, got {workers}")
+        raise GisroadsError(f"workers must be at least 1, got {workers}")
     started = time.monotonic()
     if scheduler is None and (workers == 1 or len(items) <= 1):
         for i, item in enumerate(items):
@@ -227,9 +228,9 @@ def for_each_result(func: Callable, items: Sequence, on_result: Callable, *, wor
     try:
         from distributed import as_completed
     except ImportError:
-        raise ValueError("running tiles on several workers or a scheduler needs Dask "
-                         "(pip install 'dask[distributed]', or Debian's python3-distributed);"
-                         " use one worker") from None
+        raise GisroadsError("running tiles on several workers or a scheduler needs Dask "
+                            "(pip install 'dask[distributed]', or Debian's "
+                            "python3-distributed); use one worker") from None
 
     with contextlib.ExitStack() as stack:
         client = _client(stack, workers, scheduler, len(items))

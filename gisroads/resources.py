@@ -13,6 +13,8 @@ from functools import cache
 from importlib.resources import files
 from pathlib import Path
 
+from .errors import MissingFileError
+
 _REPOSITORY = Path(__file__).resolve().parents[1]
 
 STYLES = "_styles"
@@ -28,8 +30,9 @@ def resource_dir(name: str) -> Path:
 
     The package's copy when it has one, else the repository's folder. A package imported
     from a zip file has its copy extracted once to a temporary folder (GDAL and laspy read
-    paths). Raises FileNotFoundError, naming both places, when neither exists (a broken
-    install), so a styled output is never silently written without its styles.
+    paths). Raises MissingFileError (a FileNotFoundError), naming both places, when
+    neither exists (a broken install), so a styled output is never silently written
+    without its styles.
     """
     packaged = files(__package__).joinpath(name)
     if packaged.is_dir():
@@ -38,7 +41,7 @@ def resource_dir(name: str) -> Path:
         return _extracted(packaged, name)
     if _IN_REPOSITORY[name].is_dir():
         return _IN_REPOSITORY[name]
-    raise FileNotFoundError(
+    raise MissingFileError(
         f"gisroads' {name.strip('_')} files are missing: neither {packaged} (package data of "
         f"an installed gisroads) nor {_IN_REPOSITORY[name]} (a checkout) exists; reinstall "
         "gisroads")

@@ -117,9 +117,10 @@ def progress_callback(feedback):
 
 @contextmanager
 def gisroads_errors(feedback=None):
-    """Turn gisroads' input errors and a cancel into QgsProcessingException (exit 1 in
-    qgis_process, a message box in the desktop); stages write atomically, so nothing
-    half-written is left. With ``feedback``, gisroads' warnings (no road found: empty
+    """Turn gisroads' input errors (:data:`gisroads.errors.INPUT_ERRORS`) and a cancel into
+    QgsProcessingException (exit 1 in qgis_process, a message box in the desktop); stages
+    write atomically, so nothing half-written is left. Any other exception is a bug and
+    keeps its traceback. With ``feedback``, gisroads' warnings (no road found: empty
     layers written, the algorithm succeeds) are pushed to it as warnings."""
     try:
         with (reported_warnings(feedback.pushWarning) if feedback is not None

@@ -32,6 +32,7 @@ from affine import Affine
 from rasterio.features import rasterize
 from scipy import ndimage
 
+from ..errors import GisroadsError
 from .buffer import align_to_reference, typed_parts
 
 _EDGE_NEIGHBOURS = ndimage.generate_binary_structure(2, 1)
@@ -112,15 +113,15 @@ def area_metrics_from_masks(predicted, reference, *, cell_m: float,
     ref = np.asarray(reference, dtype=bool)
     valid = np.ones(ref.shape, dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
     if not pred.shape == ref.shape == valid.shape:
-        raise ValueError(f"mask shapes differ: predicted {pred.shape}, reference {ref.shape}, "
-                         f"valid {valid.shape}")
+        raise GisroadsError(f"mask shapes differ: predicted {pred.shape}, reference "
+                            f"{ref.shape}, valid {valid.shape}")
     tp = int(np.count_nonzero(pred & ref & valid))
     fp = int(np.count_nonzero(pred & ~ref & valid))
     fn = int(np.count_nonzero(~pred & ref & valid))
     tn = int(np.count_nonzero(~pred & ~ref & valid))
     if tp + fn == 0:
-        raise ValueError("the reference has no road cell (in the valid area): "
-                         "there is nothing to evaluate against")
+        raise GisroadsError("the reference has no road cell (in the valid area): "
+                            "there is nothing to evaluate against")
     ref_side = roadside(ref)
     ref_side_count = int(np.count_nonzero(ref_side & valid))
     if ref_side_count:

@@ -29,6 +29,8 @@ import geopandas as gpd
 import numpy as np
 import shapely
 
+from ..errors import GisroadsError
+
 _KIND = shapely.GeometryType
 _LINE_TYPES = (_KIND.LINESTRING, _KIND.LINEARRING)
 _POLYGON_TYPES = (_KIND.POLYGON,)
@@ -83,7 +85,8 @@ def align_to_reference(reference, *others):
     ref = _as_series(reference)
     series = [_as_series(layer) for layer in others]
     if len(_geometries(ref)) == 0:
-        raise ValueError("the reference layer is empty: there is nothing to evaluate against")
+        raise GisroadsError("the reference layer is empty: there is nothing to evaluate "
+                            "against")
     shared = ref.crs or next((s.crs for s in series if s is not None and s.crs is not None),
                              None)
     if shared is None:
@@ -116,8 +119,8 @@ def typed_parts(geoms, kinds, *, layer: str) -> np.ndarray:
         _, first = np.unique(type_id[wrong], return_index=True)
         found = sorted(geom.geom_type for geom in parts[wrong][first])
         expected = sorted(_TYPE_NAMES[k] for k in kinds)
-        raise ValueError(f"the {layer} layer holds {', '.join(found)} geometries; "
-                         f"expected {' or '.join(expected)}")
+        raise GisroadsError(f"the {layer} layer holds {', '.join(found)} geometries; "
+                            f"expected {' or '.join(expected)}")
     return parts
 
 
@@ -147,7 +150,7 @@ def metric_lines(extracted, reference, *, valid_area=None):
     area = None if area is None else typed_parts(area, _POLYGON_TYPES, layer="valid area")
     ref = clip_lines(ref, area)
     if len(ref) == 0:
-        raise ValueError("the reference layer has no line inside the valid area")
+        raise GisroadsError("the reference layer has no line inside the valid area")
     return clip_lines(ext, area), ref, crs
 
 

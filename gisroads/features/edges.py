@@ -35,6 +35,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import fft, ndimage
 
+from ..errors import GisroadsError
+
 ANGULAR_SPACING_ON_SIGMA = 1.2
 """Orientation spacing over the angular Gaussian's sigma (Kovesi's dThetaOnSigma, 1.2-1.5):
 neighbouring orientations overlap enough that the energy varies smoothly with angle."""
@@ -129,9 +131,9 @@ def local_energy(image, *, wavelengths_px=(4, 8, 16), n_orientations: int = 8,
     """
     image = np.asarray(image, dtype=np.float32)
     if image.ndim != 2:
-        raise ValueError(f"local_energy needs a (rows, cols) image, got shape {image.shape}")
+        raise GisroadsError(f"local_energy needs a (rows, cols) image, got shape {image.shape}")
     if n_orientations < 3:
-        raise ValueError("n_orientations must be at least 3")
+        raise GisroadsError("n_orientations must be at least 3")
     valid = _valid_cells(image, mask)
     magnitude = np.zeros(image.shape, np.float32)
     orientation = np.zeros(image.shape, np.float32)

@@ -27,6 +27,8 @@ import numpy as np
 from affine import Affine
 from scipy import ndimage
 
+from ..errors import GisroadsError
+
 THETA2_RAD = float(np.radians(15.0))
 """Orientation tolerance of the interior filter, Eq. (3): theta_2 = 15 deg (paper)."""
 
@@ -109,7 +111,7 @@ def rotate_to(image, theta_rad: float, *, order: int = 1, cval=np.nan) -> tuple[
     """
     image = np.asarray(image)
     if image.ndim != 2:
-        raise ValueError(f"expected a 2-D image, got shape {image.shape}")
+        raise GisroadsError(f"expected a 2-D image, got shape {image.shape}")
     to_image, out_shape = rotated_frame(image.shape, theta_rad)
     # affine_transform maps output index (row', col') to input index (row, col), with pixel
     # centres at integers: shift the corner mapping by half a pixel on both sides.

@@ -13,6 +13,7 @@ import numpy as np
 from scipy import ndimage
 from skimage.filters import threshold_otsu
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster, RoadNetwork, network_from_centrelines
 from ..vectorize.skeleton import skeleton_lines
 
@@ -136,8 +137,8 @@ def baseline_roads(image: GeoRaster, *, smooth_m: float = 1.0, max_saturation: f
         An image in a geographic CRS (its pixel size is not in metres).
     """
     if image.crs is not None and image.crs.is_geographic:
-        raise ValueError("the image is in a geographic CRS; warp it to a metric CRS first "
-                         "(see gisroads.imagery.datasets.warp_to_utm)")
+        raise GisroadsError("the image is in a geographic CRS; warp it to a metric CRS first "
+                            "(see gisroads.imagery.datasets.warp_to_utm)")
     pixel_m = image.pixel_size
     mask = road_colour_mask(image, smooth_m=smooth_m, max_saturation=max_saturation,
                             brightness_quantiles=brightness_quantiles)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 
 STRETCH_PERCENTILES = (1.0, 99.0)
@@ -36,8 +37,8 @@ def _bands(image: GeoRaster) -> np.ndarray:
 
 def _check_band(number, count: int, what: str) -> int:
     if number is None or not 1 <= int(number) <= count:
-        raise ValueError(f"{what} band {number} does not exist: the image has {count} "
-                         f"band(s), numbered from 1")
+        raise GisroadsError(f"{what} band {number} does not exist: the image has {count} "
+                            f"band(s), numbered from 1")
     return int(number)
 
 
@@ -70,11 +71,12 @@ def scale_bands(image: GeoRaster, *, percentiles=STRETCH_PERCENTILES) -> np.ndar
     """
     low, high = percentiles
     if not 0 <= low < high <= 100:
-        raise ValueError(f"percentiles must satisfy 0 <= low < high <= 100, got {percentiles}")
+        raise GisroadsError("percentiles must satisfy 0 <= low < high <= 100, got "
+                            f"{percentiles}")
     bands = _bands(image)
     valid = valid_mask(image)
     if not valid.any():
-        raise ValueError("the image has no valid pixel")
+        raise GisroadsError("the image has no valid pixel")
     step = max(1, int(valid.sum()) // _STRETCH_SAMPLE)
     scaled = np.empty(bands.shape, np.float32)
     for band, out in zip(bands, scaled):
@@ -116,7 +118,7 @@ def visible_mean(scaled: np.ndarray, nir_band: int | None) -> np.ndarray:
     if nir_band is not None:
         keep[_check_band(nir_band, len(scaled), "NIR") - 1] = False
         if not keep.any():
-            raise ValueError("the only band of the image is the NIR band: no intensity")
+            raise GisroadsError("the only band of the image is the NIR band: no intensity")
     return scaled[keep].mean(axis=0)
 
 
@@ -148,7 +150,7 @@ def ndvi(image: GeoRaster, nir_band: int, red_band: int | None = None) -> np.nda
     red_band = default_red_band(nir_band, len(bands)) if red_band is None else red_band
     red_band = _check_band(red_band, len(bands), "red")
     if red_band == nir_band:
-        raise ValueError(f"the NIR and red bands are the same band ({nir_band})")
+        raise GisroadsError(f"the NIR and red bands are the same band ({nir_band})")
     nir, red = _float_bands(image, (nir_band, red_band), ("NIR", "red"))
     total = nir + red
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -231,7 +233,7 @@ def resample_to(raster: GeoRaster, like: GeoRaster, *, order: int = 1) -> np.nda
     data = np.asarray(raster.data, np.float32)
     if data.ndim == 3:
         if data.shape[0] != 1:
-            raise ValueError(f"expected a single-band raster, got {data.shape[0]} bands")
+            raise GisroadsError(f"expected a single-band raster, got {data.shape[0]} bands")
         data = data[0]
     if raster.nodata is not None and not np.isnan(raster.nodata):
         data = np.where(data == raster.nodata, np.nan, data)
@@ -282,7 +284,7 @@ def ground_surface(dsm: np.ndarray, pixel_m: float, *, window_m: float = 30.0,
     ndarray of float32, DSM shape; NaN where no valid cell lies within half a window.
     """
     if window_m <= 0 or cell_m <= 0 or pixel_m <= 0:
-        raise ValueError("window_m, cell_m and pixel_m must be positive")
+        raise GisroadsError("window_m, cell_m and pixel_m must be positive")
     block = max(1, int(round(cell_m / pixel_m)))
     rows, cols = dsm.shape
     blocks = np.full((-(-rows // block) * block, -(-cols // block) * block), np.inf,
@@ -323,12 +325,12 @@ def normalised_dsm(dsm: GeoRaster, like: GeoRaster, *, window_m: float = 30.0,
     data = np.asarray(dsm.data, np.float32)
     if data.ndim == 3:
         if data.shape[0] != 1:
-            raise ValueError(f"a DSM has one band, got {data.shape[0]}")
+            raise GisroadsError(f"a DSM has one band, got {data.shape[0]}")
         data = data[0]
     if dsm.nodata is not None and not np.isnan(dsm.nodata):
         data = np.where(data == dsm.nodata, np.nan, data)
     if np.isnan(data).all():
-        raise ValueError("the DSM has no valid cell")
+        raise GisroadsError("the DSM has no valid cell")
     height = data - ground_surface(data, dsm.pixel_size, window_m=window_m, cell_m=cell_m)
     return resample_to(GeoRaster(height, dsm.transform, dsm.crs), like)
 

@@ -56,6 +56,7 @@ from rasterio.warp import reproject
 from scipy import ndimage
 from shapely.geometry import shape as as_shape
 
+from ..errors import GisroadsError, MissingFileError
 from ..evaluate.buffer import clip_lines
 from ..geo import GeoRaster
 from ..io.raster import read_raster
@@ -151,8 +152,8 @@ class BenchmarkImage:
         """The window ``[row:row+rows, col:col+cols]`` with its truth and valid area."""
         height, width = self.image.shape
         if not (0 <= row < height and 0 <= col < width and rows > 0 and cols > 0):
-            raise ValueError(f"window ({row}, {col}, {rows}, {cols}) lies outside the "
-                             f"{height} x {width} image")
+            raise GisroadsError(f"window ({row}, {col}, {rows}, {cols}) lies outside the "
+                                f"{height} x {width} image")
         window = (slice(row, row + rows), slice(col, col + cols))
         image = crop_raster(self.image, *window)
         mask = None if self.truth_mask is None else crop_raster(self.truth_mask, *window)
@@ -303,7 +304,7 @@ def warp_to_utm(path, pixel_m: float, *, resampling=Resampling.bilinear,
         data, src_transform, src_crs, bounds = src.read(), src.transform, src.crs, src.bounds
     crs = CRS.from_user_input(src_crs.to_wkt())
     if not crs.is_geographic:
-        raise ValueError(f"{path}: expected a geographic CRS, got {crs.name}")
+        raise GisroadsError(f"{path}: expected a geographic CRS, got {crs.name}")
     utm, transform, shape, footprint = _utm_grid(tuple(bounds), crs, pixel_m)
     warped = np.full((len(data), *shape), nodata, dtype=data.dtype)
     reproject(source=data, destination=warped, src_transform=src_transform, src_crs=src_crs,
@@ -444,7 +445,7 @@ def benchmark_images(data_dir=DATA_DIR, *, datasets=DATASETS) -> list[BenchmarkI
     """
     unknown = set(datasets) - set(DATASETS)
     if unknown:
-        raise ValueError(f"unknown datasets {sorted(unknown)}; choose from {DATASETS}")
+        raise GisroadsError(f"unknown datasets {sorted(unknown)}; choose from {DATASETS}")
     if not Path(data_dir).is_dir():
-        raise FileNotFoundError(f"{data_dir}: no imagery benchmark folder")
+        raise MissingFileError(f"{data_dir}: no imagery benchmark folder")
     return [record for name in datasets for record in _LOADERS[name](data_dir)]

@@ -48,6 +48,7 @@ from scipy.sparse.csgraph import connected_components
 from skimage.measure import label as connected_regions
 from skimage.morphology import skeletonize
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..progress import report
 from ..segmentation.ncut import typical_scale
@@ -373,16 +374,16 @@ def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, nd
     """
     labels = np.asarray(labels)
     if labels.ndim != 2 or not np.issubdtype(labels.dtype, np.integer):
-        raise ValueError(f"labels must be a 2-D integer array, got {labels.dtype} "
-                         f"{labels.shape}")
+        raise GisroadsError(f"labels must be a 2-D integer array, got {labels.dtype} "
+                            f"{labels.shape}")
     if labels.shape != image.shape:
-        raise ValueError(f"labels {labels.shape} and image {image.shape} differ in shape")
+        raise GisroadsError(f"labels {labels.shape} and image {image.shape} differ in shape")
     if not 0 < merge_fraction <= 1:
-        raise ValueError(f"merge_fraction must lie in (0, 1], got {merge_fraction}")
+        raise GisroadsError(f"merge_fraction must lie in (0, 1], got {merge_fraction}")
     limits = dict(CRITERIA)
     for name, value in (criteria or {}).items():
         if name not in CRITERIA:
-            raise ValueError(f"unknown criterion {name!r}; known: {sorted(CRITERIA)}")
+            raise GisroadsError(f"unknown criterion {name!r}; known: {sorted(CRITERIA)}")
         limits[name] = tuple(value)
     compact, n = _compact(labels)
     report(progress, 0.0, "grouping: segment statistics")
@@ -392,20 +393,20 @@ def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, nd
     if ndvi is not None:
         ndvi = np.asarray(ndvi, dtype=float)
         if ndvi.shape != labels.shape:
-            raise ValueError(f"ndvi {ndvi.shape} and image {labels.shape} differ in shape")
+            raise GisroadsError(f"ndvi {ndvi.shape} and image {labels.shape} differ in shape")
     if probability is not None:
         probability = np.asarray(probability, dtype=float)
         if probability.shape != labels.shape:
-            raise ValueError(f"probability {probability.shape} and image {labels.shape} "
-                             "differ in shape")
+            raise GisroadsError(f"probability {probability.shape} and image {labels.shape} "
+                                "differ in shape")
     grouped = compact
     if n >= 2:
         bands = scale_bands(image)
         edges = (edge_strength(image, nir_band=nir_band, bands=bands)
                  if edge_magnitude is None else np.asarray(edge_magnitude, dtype=float))
         if edges.shape != labels.shape:
-            raise ValueError(f"edge_magnitude {edges.shape} and image {labels.shape} differ "
-                             "in shape")
+            raise GisroadsError(f"edge_magnitude {edges.shape} and image {labels.shape} differ "
+                                "in shape")
         state = _State(compact, bands, edges,
                        None if dsm is None else resample_to(dsm, image), ndvi, probability, n)
         _merge_iteratively(state, limits, pixel_m, merge_fraction, max_iterations, progress)
@@ -448,7 +449,7 @@ def split_branching_segments(labels, *, pixel_m: float, min_branch_m: float = MI
     """
     labels = np.asarray(labels)
     if pixel_m <= 0 or min_branch_m < 0:
-        raise ValueError("pixel_m must be positive and min_branch_m non-negative")
+        raise GisroadsError("pixel_m must be positive and min_branch_m non-negative")
     out = labels.astype(np.int64).copy()
     fresh = int(labels.max()) + 1
     # a segment with min_branches arms spans at least two of them end to end

@@ -47,6 +47,7 @@ from scipy import ndimage, sparse
 from scipy.sparse import csgraph
 from skimage.morphology import skeletonize
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..progress import Progress, report, scaled
 from ..vectorize.regions import segment_polygons
@@ -105,23 +106,23 @@ TESTS = ("not elongated", "not convex", "too narrow", "too wide", "irregular wid
 def _metric_pixel(image: GeoRaster) -> float:
     t = image.transform
     if t.b or t.d or not np.isclose(abs(t.a), abs(t.e)):
-        raise ValueError("road parts need square, north-up pixels; warp the image first")
+        raise GisroadsError("road parts need square, north-up pixels; warp the image first")
     crs = None if image.crs is None else CRS.from_user_input(image.crs)
     if crs is not None and not crs.is_projected:
-        raise ValueError(f"road parts are measured in metres; {crs.name} is not a "
-                         "projected CRS (warp the image to one, e.g. its UTM zone)")
+        raise GisroadsError(f"road parts are measured in metres; {crs.name} is not a "
+                            "projected CRS (warp the image to one, e.g. its UTM zone)")
     return image.pixel_size
 
 
 def _check_labels(labels, shape) -> np.ndarray:
     labels = np.asarray(labels)
     if labels.ndim != 2 or not np.issubdtype(labels.dtype, np.integer):
-        raise ValueError(f"labels must be a 2-D integer array, got {labels.dtype} "
-                         f"{labels.shape}")
+        raise GisroadsError(f"labels must be a 2-D integer array, got {labels.dtype} "
+                            f"{labels.shape}")
     if labels.shape != tuple(shape):
-        raise ValueError(f"labels {labels.shape} and image {tuple(shape)} differ in shape")
+        raise GisroadsError(f"labels {labels.shape} and image {tuple(shape)} differ in shape")
     if labels.size and labels.min() < -1:
-        raise ValueError("labels must be >= 0 (segments) or -1 (no data)")
+        raise GisroadsError("labels must be >= 0 (segments) or -1 (no data)")
     return labels
 
 
@@ -434,13 +435,13 @@ def measure_segments(labels, image: GeoRaster, *, ndvi=None, ndsm=None,
                          base.saturation)
     for name, cue in (("ndvi", cues.ndvi), ("ndsm", cues.ndsm)):
         if cue is not None and np.shape(cue) != labels.shape:
-            raise ValueError(f"{name} {np.shape(cue)} is not on the image grid "
-                             f"{labels.shape}")
+            raise GisroadsError(f"{name} {np.shape(cue)} is not on the image grid "
+                                f"{labels.shape}")
     if edge_magnitude is None:
         edge_magnitude = local_energy(cues.intensity)[0]
     elif np.shape(edge_magnitude) != labels.shape:
-        raise ValueError(f"edge_magnitude {np.shape(edge_magnitude)} is not on the image "
-                         f"grid {labels.shape}")
+        raise GisroadsError(f"edge_magnitude {np.shape(edge_magnitude)} is not on the image "
+                            f"grid {labels.shape}")
     return _measure(labels, cues, np.asarray(edge_magnitude), image.transform, image.crs,
                     pixel_m, max_width_m, progress)
 
@@ -610,12 +611,12 @@ def _verdict(segments: pd.DataFrame, criteria: dict) -> dict:
     c = criteria
     (low_w, high_w), (low_i, high_i) = c["width_range_m"], c["intensity_range"]
     if not (0 < low_w < high_w and low_i < high_i):
-        raise ValueError("width_range_m and intensity_range must be (min, max) with "
-                         "min < max, widths positive")
+        raise GisroadsError("width_range_m and intensity_range must be (min, max) with "
+                            "min < max, widths positive")
     if not c["elongation_min"] < c["elongation_curved_min"]:
-        raise ValueError("elongation_curved_min must exceed elongation_min")
+        raise GisroadsError("elongation_curved_min must exceed elongation_min")
     if c["min_length_m"] <= 0:
-        raise ValueError("min_length_m must be positive")
+        raise GisroadsError("min_length_m must be positive")
     s = {name: segments[name].to_numpy(float) for name in SEGMENT_COLUMNS[1:]}
     probability = (segments["road_probability"].to_numpy(float)
                    if "road_probability" in segments else np.full(len(segments), np.nan))
@@ -687,14 +688,14 @@ def rasterize_segments(segments: gpd.GeoDataFrame, like: GeoRaster, *,
     ndarray of int32, ``like.shape``; -1 outside every polygon.
     """
     if id_column not in segments:
-        raise ValueError(f"the segments have no {id_column!r} field")
+        raise GisroadsError(f"the segments have no {id_column!r} field")
     ids = pd.to_numeric(segments[id_column], errors="coerce").to_numpy(float)
     if len(ids) and (np.isnan(ids).any() or (ids < 0).any() or (ids != np.round(ids)).any()
                      or ids.max() >= np.iinfo(np.int32).max):
-        raise ValueError(f"{id_column} must hold non-negative integers")
+        raise GisroadsError(f"{id_column} must hold non-negative integers")
     crs = None if like.crs is None else CRS.from_user_input(like.crs)
     if segments.crs is not None and crs is not None and CRS.from_user_input(segments.crs) != crs:
-        raise ValueError("the segments are in another CRS than the image; reproject them")
+        raise GisroadsError("the segments are in another CRS than the image; reproject them")
     shapes = [(g, int(i)) for g, i in zip(segments.geometry.values, ids)
               if g is not None and not g.is_empty]
     if not shapes:
@@ -784,8 +785,8 @@ def merge_adjacent_parts(segments: gpd.GeoDataFrame, labels, image: GeoRaster,
     """
     unknown = set(criteria or {}) - set(CRITERIA)
     if unknown:
-        raise ValueError(f"unknown road-part criteria {sorted(unknown)}; "
-                         f"choose from {sorted(CRITERIA)}")
+        raise GisroadsError(f"unknown road-part criteria {sorted(unknown)}; "
+                            f"choose from {sorted(CRITERIA)}")
     criteria = {**CRITERIA, **(criteria or {})}
     pixel_m = _metric_pixel(image)
     labels = _check_labels(labels, image.shape).copy()
@@ -886,8 +887,8 @@ def extract_road_parts(labels, image: GeoRaster, *, nir_band: int | None = None,
     """
     unknown = set(criteria) - set(CRITERIA)
     if unknown:
-        raise ValueError(f"unknown road-part criteria {sorted(unknown)}; "
-                         f"choose from {sorted(CRITERIA)}")
+        raise GisroadsError(f"unknown road-part criteria {sorted(unknown)}; "
+                            f"choose from {sorted(CRITERIA)}")
     report(progress, 0.0, "image cues")
     if cues is None:
         cues = image_cues(image, nir_band=nir_band, red_band=red_band, dsm=dsm)

@@ -48,6 +48,7 @@ from pyproj import CRS
 from scipy import ndimage, sparse
 from skimage.measure import label as connected_regions
 
+from ..errors import GisroadsError
 from ..features.edges import local_energy
 from ..geo import GeoRaster
 from ..progress import report
@@ -129,7 +130,7 @@ def ndvi_affinity(adjacency, superpixel_ndvi: np.ndarray, *,
         ``w_ndvi`` at such pairs, no entry elsewhere.
     """
     if not 0 < w_ndvi <= 1:
-        raise ValueError(f"w_ndvi must lie in (0, 1], got {w_ndvi}")
+        raise GisroadsError(f"w_ndvi must lie in (0, 1], got {w_ndvi}")
     pairs = sparse.triu(sparse.csr_matrix(adjacency), k=1).tocoo()
     vegetation = np.asarray(superpixel_ndvi) > ndvi_threshold
     across = vegetation[pairs.row] != vegetation[pairs.col]
@@ -155,8 +156,8 @@ def edge_strength(image: GeoRaster, *, nir_band: int | None = None,
 def _checked_edges(edge_magnitude, shape) -> np.ndarray:
     edges = np.asarray(edge_magnitude, dtype=float)
     if edges.shape != tuple(shape):
-        raise ValueError(f"edge_magnitude {edges.shape} and image {tuple(shape)} differ in "
-                         "shape")
+        raise GisroadsError(f"edge_magnitude {edges.shape} and image {tuple(shape)} differ in "
+                            "shape")
     return edges
 
 
@@ -243,16 +244,16 @@ def segment_image(image: GeoRaster, *, nir_band: int | None = None,
     """
     valid = valid_mask(image)
     if not valid.any():
-        raise ValueError("the image has no valid pixel")
+        raise GisroadsError("the image has no valid pixel")
     default_segments, default_superpixels = default_counts(image)
     n_segments = default_segments if n_segments is None else int(n_segments)
     if n_segments < 1:
-        raise ValueError(f"n_segments must be at least 1, got {n_segments}")
+        raise GisroadsError(f"n_segments must be at least 1, got {n_segments}")
     n_superpixels = default_superpixels if n_superpixels is None else int(n_superpixels)
     n_superpixels = max(n_superpixels, 2 * n_segments)
 
     if not 0 < w_ndvi <= 1:
-        raise ValueError(f"w_ndvi must lie in (0, 1], got {w_ndvi}")
+        raise GisroadsError(f"w_ndvi must lie in (0, 1], got {w_ndvi}")
     report(progress, 0.0, "edges")
     bands = scale_bands(image)
     edges = (edge_strength(image, nir_band=nir_band, bands=bands) if edge_magnitude is None
@@ -278,8 +279,8 @@ def segment_image(image: GeoRaster, *, nir_band: int | None = None,
     if probability is not None:
         probability = np.asarray(probability, dtype=float)
         if probability.shape != image.shape:
-            raise ValueError(f"probability {probability.shape} and image {image.shape} "
-                             "differ in shape")
+            raise GisroadsError(f"probability {probability.shape} and image {image.shape} "
+                                "differ in shape")
         extra.append(value_affinity(adjacency, _node_means(superpixels, probability, n_nodes),
                                     sigma_p))
 
@@ -330,7 +331,7 @@ def segments_to_frame(labels, raster: GeoRaster) -> gpd.GeoDataFrame:
     """
     labels = np.asarray(labels)
     if labels.shape != raster.shape:
-        raise ValueError(f"labels {labels.shape} and raster {raster.shape} differ in shape")
+        raise GisroadsError(f"labels {labels.shape} and raster {raster.shape} differ in shape")
     present = np.unique(labels[labels >= 0])
     compact = np.full(labels.shape, -1, np.int32)
     compact[labels >= 0] = np.searchsorted(present, labels[labels >= 0])

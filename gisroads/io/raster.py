@@ -13,6 +13,7 @@ import numpy as np
 import rasterio
 from affine import Affine
 from pyproj import CRS
+from pyproj.exceptions import CRSError
 from rasterio.enums import ColorInterp
 from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 
@@ -84,8 +85,8 @@ def read_raster(path, *, pixel_size: float | None = None, crs=None,
     Raises
     ------
     RasterError
-        Unreadable file, missing georeferencing without ``pixel_size``/``crs``, or a raster
-        with no valid cell.
+        Unreadable file, missing georeferencing without ``pixel_size``/``crs``, a ``crs``
+        pyproj does not know, or a raster with no valid cell.
     """
     path = Path(path)
     if not path.exists():
@@ -112,7 +113,10 @@ def read_raster(path, *, pixel_size: float | None = None, crs=None,
         if pixel_size is None or crs is None:
             raise RasterError(f"{path}: give both a pixel size and a CRS")
         transform = Affine(pixel_size, 0, origin[0], 0, -pixel_size, origin[1])
-        file_crs = CRS.from_user_input(crs)
+        try:
+            file_crs = CRS.from_user_input(crs)
+        except CRSError as err:
+            raise RasterError(f"{path}: {crs!r} is not a CRS ({err})") from None
     elif not georeferenced:
         raise NotGeoreferencedError(path)
     if np.issubdtype(data.dtype, np.floating):

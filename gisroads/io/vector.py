@@ -20,7 +20,7 @@ from pathlib import Path
 import geopandas as gpd
 import pandas as pd
 
-from ..errors import MissingFileError
+from ..errors import GisroadsError, MissingFileError
 from ..geo import CONTRACT_GEOMETRY
 from ..resources import styles_dir
 
@@ -130,7 +130,7 @@ def write_geopackage(path, layers: dict[str, gpd.GeoDataFrame], *,
     """
     writer = GeoPackageWriter(path, styles_dir=styles_dir)
     if not layers:
-        raise ValueError("write_geopackage needs at least one layer")
+        raise GisroadsError("write_geopackage needs at least one layer")
     with writer as gpkg:
         for name, frame in layers.items():
             gpkg.write(name, frame)
@@ -161,7 +161,7 @@ class GeoPackageWriter:
     def __init__(self, path, *, styles_dir: Path = STYLES_DIR, batch_features: int = 100_000):
         self.path = Path(path)
         if self.path.suffix.lower() != ".gpkg":
-            raise ValueError(f"{self.path}: a GeoPackage path must end in .gpkg")
+            raise GisroadsError(f"{self.path}: a GeoPackage path must end in .gpkg")
         self.styles_dir = styles_dir
         self._written: dict[str, int] = {}  # layer -> features
         self._empty: dict[str, gpd.GeoDataFrame] = {}  # appended-to layers with no feature yet
@@ -178,7 +178,7 @@ class GeoPackageWriter:
     def write(self, name: str, frame: gpd.GeoDataFrame) -> None:
         """Write the whole layer ``name`` (an empty frame gives an empty layer)."""
         if name in self._written:
-            raise ValueError(f"layer {name!r} is already written")
+            raise GisroadsError(f"layer {name!r} is already written")
         self._to_file(name, frame, "w")
 
     def append(self, name: str, frame: gpd.GeoDataFrame) -> None:
@@ -230,7 +230,7 @@ class GeoPackageWriter:
     def _finish(self) -> None:
         """The geometry types of empty layers and the styles, once every layer is in."""
         if not self._written:
-            raise ValueError("a GeoPackage needs at least one layer")
+            raise GisroadsError("a GeoPackage needs at least one layer")
         empty_types = {n: kind for n, count in self._written.items() if count == 0
                        and (kind := declared_geometry_type(n, self.styles_dir)) is not None}
         if empty_types:
@@ -264,12 +264,12 @@ def read_layer(path, layer: str | None = None, *, crs=None) -> gpd.GeoDataFrame:
     except Exception as err:  # noqa: BLE001: pyogrio's and Fiona's errors share no base
         if not type(err).__module__.startswith(("pyogrio", "fiona")):
             raise
-        raise ValueError(f"{path}: not a readable vector file "
-                         f"({str(err).splitlines()[0] if str(err) else type(err).__name__})"
-                         ) from None
+        raise GisroadsError(f"{path}: not a readable vector file "
+                            f"({str(err).splitlines()[0] if str(err) else type(err).__name__})"
+                            ) from None
     if crs is not None and len(frame):
         if frame.crs is None:
-            raise ValueError(f"{path}: layer has no CRS; cannot reproject it to {crs}")
+            raise GisroadsError(f"{path}: layer has no CRS; cannot reproject it to {crs}")
         frame = frame.to_crs(crs)
     return frame
 
@@ -280,7 +280,7 @@ def _query(path, sql: str) -> list[tuple]:
     try:
         return con.execute(sql).fetchall()
     except sqlite3.DatabaseError as err:
-        raise ValueError(f"{path}: not a GeoPackage ({err})") from None
+        raise GisroadsError(f"{path}: not a GeoPackage ({err})") from None
     finally:
         con.close()
 

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from . import features as ft
 from .model import RoadModel, load_model, sigmoid
@@ -111,18 +112,18 @@ def context_probability(probability: GeoRaster, model: RoadModel | None = None, 
     """
     model = load_context_model() if model is None else model
     if model.feature_names != context_feature_names():
-        raise ValueError("the model was not trained on context features")
+        raise GisroadsError("the model was not trained on context features")
     data = np.asarray(probability.data)
     if data.ndim == 3:
         if data.shape[0] != 1:
-            raise ValueError("the probability must have one band")
+            raise GisroadsError("the probability must have one band")
         data = data[0]
     data = data.astype(np.float32)
     valid = np.isfinite(data)
     if probability.nodata is not None and not np.isnan(probability.nodata):
         valid &= data != probability.nodata
     if valid.any() and (data[valid].min() < 0 or data[valid].max() > 1):
-        raise ValueError("the probability must lie in [0, 1] (scale a 0-255 raster first)")
+        raise GisroadsError("the probability must lie in [0, 1] (scale a 0-255 raster first)")
     factor = ft.work_factor(ft.metric_pixel_size(probability))
     pixel_m = probability.pixel_size * factor
     (work,), work_valid = ft.block_mean(data[None], valid, factor)

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..progress import Progress, report
 from .features import metric_pixel_size, rgb_bands, valid_pixels
@@ -109,18 +110,18 @@ def load_convnet(path=None, *, threads: int = 1) -> ConvNet:
     """
     path = Path(path) if path is not None else DEFAULT_CONVNET_PATH
     if not path.is_file():
-        raise ValueError(f"{path}: no such road model file")
+        raise GisroadsError(f"{path}: no such road model file")
     try:
         session = _session(path, threads)
     except Exception as error:  # onnxruntime raises its own exception types
-        raise ValueError(f"{path}: not a readable ONNX model ({error})") from error
+        raise GisroadsError(f"{path}: not a readable ONNX model ({error})") from error
     entries = session.get_modelmeta().custom_metadata_map
     if "gisroads" not in entries:
-        raise ValueError(f"{path}: an ONNX model without gisroads metadata (train it with "
-                         "'gisroads train' or scripts/train_road_cnn.py)")
+        raise GisroadsError(f"{path}: an ONNX model without gisroads metadata (train it with "
+                            "'gisroads train' or scripts/train_road_cnn.py)")
     metadata = json.loads(entries["gisroads"])
     if "pixel_m" not in metadata:
-        raise ValueError(f"{path}: its gisroads metadata has no pixel_m")
+        raise GisroadsError(f"{path}: its gisroads metadata has no pixel_m")
     return ConvNet(path, metadata, session)
 
 
@@ -139,7 +140,7 @@ def normalisation(bands: np.ndarray, valid: np.ndarray, *,
     step = max(1, values.shape[1] // max_samples)
     values = values[:, ::step].ravel()
     if values.size == 0:
-        raise ValueError("the image has no valid pixel")
+        raise GisroadsError("the image has no valid pixel")
     low, high = np.percentile(values, percentiles)
     return float(low), float(max(high, low + 1e-6))
 
@@ -277,7 +278,7 @@ def convnet_probability(image: GeoRaster, model: ConvNet | None = None, *,
     """
     model = load_convnet() if model is None else model
     if overlap_px >= tile_px // 2:
-        raise ValueError("overlap_px must be less than half of tile_px")
+        raise GisroadsError("overlap_px must be less than half of tile_px")
     grid = _Resampler(image, model.pixel_m)
     low, high = normalisation(*grid.sample())
     rows, cols = grid.shape

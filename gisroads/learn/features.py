@@ -42,6 +42,7 @@ import numpy as np
 from pyproj import CRS
 from scipy import ndimage
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 
 SCALES_M = (0.5, 1.0, 2.0, 4.0, 8.0)
@@ -119,15 +120,17 @@ def metric_pixel_size(image: GeoRaster) -> float:
     """
     t = image.transform
     if t.b or t.d or not np.isclose(abs(t.a), abs(t.e)):
-        raise ValueError("the road model needs square, north-up pixels; warp the image first")
+        raise GisroadsError("the road model needs square, north-up pixels; warp the image "
+                            "first")
     if image.crs is None:
-        raise ValueError("the image has no CRS: the road model measures its features in "
-                         "metres")
+        raise GisroadsError("the image has no CRS: the road model measures its features in "
+                            "metres")
     crs = CRS.from_user_input(image.crs)
     if not crs.is_projected or any(axis.unit_conversion_factor != 1.0
                                    for axis in crs.axis_info[:2]):
-        raise ValueError(f"the road model measures its features in metres; {crs.name} is not "
-                         "a projected metre CRS (warp the image to one, e.g. its UTM zone)")
+        raise GisroadsError(f"the road model measures its features in metres; {crs.name} "
+                            "is not a projected metre CRS (warp the image to one, e.g. its "
+                            "UTM zone)")
     return image.pixel_size
 
 
@@ -158,7 +161,7 @@ def rgb_bands(data: np.ndarray) -> np.ndarray:
     if data.ndim == 2:
         data = data[None]
     if data.ndim != 3 or data.shape[0] == 2 or data.shape[0] == 0:
-        raise ValueError(f"expected a 1-band or 3+-band image, got shape {data.shape}")
+        raise GisroadsError(f"expected a 1-band or 3+-band image, got shape {data.shape}")
     return data[:3].astype(np.float32) if data.shape[0] >= 3 else data.astype(np.float32)
 
 
@@ -216,7 +219,7 @@ def image_statistics(bands: np.ndarray, valid: np.ndarray) -> ImageStatistics:
     """
     count = int(valid.sum())
     if count == 0:
-        raise ValueError("the image has no valid pixel")
+        raise GisroadsError("the image has no valid pixel")
     step = max(1, count // _SAMPLE)
     sample = bands[:, valid][:, ::step].astype(np.float64)
     band_median = np.median(sample, axis=1)
@@ -250,8 +253,8 @@ def compute_features(bands: np.ndarray, valid: np.ndarray, pixel_m: float,
     ndarray of float32, shape (n_features, rows, cols)
     """
     if len(bands) != len(stats.band_median):
-        raise ValueError(f"{len(bands)} band(s) but statistics of "
-                         f"{len(stats.band_median)}")
+        raise GisroadsError(f"{len(bands)} band(s) but statistics of "
+                            f"{len(stats.band_median)}")
     balanced = bands.astype(np.float32) / stats.band_median.astype(np.float32)[:, None, None]
     balanced = np.where(valid, balanced, np.float32(1.0))
     z = (balanced.mean(axis=0) - np.float32(stats.median)) / np.float32(stats.spread)

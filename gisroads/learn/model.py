@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 from affine import Affine
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from . import features as ft
 
@@ -88,8 +89,8 @@ class RoadModel:
         """Log-odds of road for samples ``X`` of shape ``(n_features, n)``, float64."""
         X = np.asarray(X)
         if X.ndim != 2 or X.shape[0] != len(self.feature_names):
-            raise ValueError(f"expected features of shape ({len(self.feature_names)}, n), "
-                             f"got {X.shape}")
+            raise GisroadsError(f"expected features of shape ({len(self.feature_names)}, n), "
+                                f"got {X.shape}")
         n = X.shape[1]
         out = np.full(n, self.baseline, np.float64)
         # deepest trees first: at level k only the first active[k] trees still move
@@ -141,16 +142,16 @@ def from_sklearn(classifier, feature_names, *, metadata=None) -> RoadModel:
         Not binary, categorical splits, or feature names of the wrong length.
     """
     if len(classifier.classes_) != 2 or classifier.n_trees_per_iteration_ != 1:
-        raise ValueError("only binary classifiers can be exported")
+        raise GisroadsError("only binary classifiers can be exported")
     if classifier.n_features_in_ != len(feature_names):
-        raise ValueError(f"the classifier has {classifier.n_features_in_} features, "
-                         f"{len(feature_names)} names given")
+        raise GisroadsError(f"the classifier has {classifier.n_features_in_} features, "
+                            f"{len(feature_names)} names given")
     parts = {k: [] for k in ("feature", "threshold", "left", "missing_left", "value")}
     roots, depth, start = [], 0, 0
     for (predictor,) in classifier._predictors:
         nodes = predictor.nodes
         if np.any(nodes["is_categorical"]):
-            raise ValueError("categorical splits cannot be exported")
+            raise GisroadsError("categorical splits cannot be exported")
         # breadth-first order puts the two children of a node side by side
         order = [0]
         for node in order:
@@ -195,17 +196,17 @@ def _checked(model: RoadModel) -> RoadModel:
     n = len(model.feature)
     if not (len(model.threshold) == len(model.left) == len(model.missing_left)
             == len(model.value) == n) or n == 0:
-        raise ValueError("the model's node arrays differ in length or are empty")
+        raise GisroadsError("the model's node arrays differ in length or are empty")
     if model.feature.min() < 0 or model.feature.max() >= len(model.feature_names):
-        raise ValueError("the model tests features it does not name")
+        raise GisroadsError("the model tests features it does not name")
     leaf = model.left == np.arange(n)
     if (model.left.min() < 0 or model.left[~leaf].max(initial=0) + 1 >= n
             or model.roots.min(initial=0) < 0 or model.roots.max(initial=0) >= n):
-        raise ValueError("the model's node links point outside it")
+        raise GisroadsError("the model's node links point outside it")
     if not (0 <= model.depth <= 64) or not np.all(np.isinf(model.threshold[leaf])):
-        raise ValueError("the model's tree depth or leaves are invalid")
+        raise GisroadsError("the model's tree depth or leaves are invalid")
     if (model.tree_depth < 0).any():
-        raise ValueError("the model's trees are deeper than it states")
+        raise GisroadsError("the model's trees are deeper than it states")
     return model
 
 
@@ -244,18 +245,18 @@ def load_model(path=None, *, feature_names=None) -> RoadModel:
     except (OSError, ValueError) as error:
         if isinstance(error, FileNotFoundError):
             raise
-        raise ValueError(f"{path}: not a road model archive ({error})") from None
+        raise GisroadsError(f"{path}: not a road model archive ({error})") from None
     if "format" not in arrays or str(arrays["format"]) != MODEL_FORMAT:
-        raise ValueError(f"{path}: not a {MODEL_FORMAT} archive")
+        raise GisroadsError(f"{path}: not a {MODEL_FORMAT} archive")
     version = int(arrays["version"])
     if version != MODEL_VERSION:
-        raise ValueError(f"{path}: road model version {version}; this gisroads reads "
-                         f"version {MODEL_VERSION} (retrain it)")
+        raise GisroadsError(f"{path}: road model version {version}; this gisroads reads "
+                            f"version {MODEL_VERSION} (retrain it)")
     names = tuple(str(n) for n in arrays["feature_names"])
     expected = ft.feature_names() if feature_names is None else tuple(feature_names)
     if names != expected or not np.array_equal(arrays["scales_m"], _scales()):
-        raise ValueError(f"{path}: the model was trained on other features than this "
-                         "gisroads computes (retrain it)")
+        raise GisroadsError(f"{path}: the model was trained on other features than this "
+                            "gisroads computes (retrain it)")
     return _checked(RoadModel(
         feature=arrays["feature"].astype(np.int16), threshold=arrays["threshold"].astype(float),
         left=arrays["left"].astype(np.int32), missing_left=arrays["missing_left"].astype(bool),
@@ -301,10 +302,10 @@ def fit_model(X: np.ndarray, y: np.ndarray, *, seed: int = 0, max_iter: int = 80
     X = np.asarray(X, np.float32)
     y = np.asarray(y, bool)
     if X.ndim != 2 or X.shape[0] != len(names) or X.shape[1] != len(y):
-        raise ValueError(f"expected X of shape ({len(names)}, n) and y of "
-                         f"shape (n,), got {X.shape} and {y.shape}")
+        raise GisroadsError(f"expected X of shape ({len(names)}, n) and y of "
+                            f"shape (n,), got {X.shape} and {y.shape}")
     if y.all() or not y.any():
-        raise ValueError("training needs both road and non-road samples")
+        raise GisroadsError("training needs both road and non-road samples")
     params = dict(max_iter=max_iter, max_leaf_nodes=max_leaf_nodes, max_depth=max_depth,
                   learning_rate=learning_rate, min_samples_leaf=min_samples_leaf,
                   l2_regularization=l2_regularization)
@@ -319,7 +320,7 @@ def fit_model(X: np.ndarray, y: np.ndarray, *, seed: int = 0, max_iter: int = 80
     if road_share is None:
         return model
     if not 0 < road_share < 1:
-        raise ValueError(f"road_share must lie in (0, 1), got {road_share}")
+        raise GisroadsError(f"road_share must lie in (0, 1), got {road_share}")
     shift = _logit(road_share) - _logit(float(y.mean()))
     return replace(model, baseline=model.baseline + shift)
 
@@ -331,7 +332,7 @@ def _logit(p: float) -> float:
 def blend_models(first: RoadModel, second: RoadModel, weight: float) -> RoadModel:
     """One model whose log-odds are ``(1 - weight) * first + weight * second``."""
     if first.feature_names != second.feature_names:
-        raise ValueError("the models use different features")
+        raise GisroadsError("the models use different features")
     offset = len(first.feature)
     return _checked(RoadModel(
         feature=np.concatenate([first.feature, second.feature]),
@@ -428,7 +429,7 @@ class WorkGrid:
         """Work windows ``(r0, r1, c0, c1)`` of at most ``tile_px`` square covering the
         grid."""
         if tile_px < 1:
-            raise ValueError("tile_px must be positive")
+            raise GisroadsError("tile_px must be positive")
         rows, cols = self.shape
         for r0 in range(0, rows, tile_px):
             for c0 in range(0, cols, tile_px):

@@ -5,6 +5,7 @@ import geopandas as gpd
 import numpy as np
 from scipy import stats
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..vectorize.skeleton import skeleton_lines
 
@@ -31,7 +32,7 @@ def pixel_auc(probability: np.ndarray, road: np.ndarray, valid: np.ndarray | Non
     probability = np.asarray(probability, np.float64)
     road = np.asarray(road, bool)
     if probability.shape != road.shape:
-        raise ValueError(f"probability {probability.shape} and road {road.shape} differ")
+        raise GisroadsError(f"probability {probability.shape} and road {road.shape} differ")
     keep = np.isfinite(probability) if valid is None else np.isfinite(probability) & valid
     p, r = probability[keep], road[keep]
     step = max(1, len(p) // max_pixels)

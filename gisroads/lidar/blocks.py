@@ -44,6 +44,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from skimage.segmentation import watershed
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import leading_eigenpairs, ncut
@@ -71,11 +72,11 @@ EDGE_SAMPLES_PER_CHUNK = 4_000_000
 
 def _metres_per_unit(crs) -> float:
     if crs is None:
-        raise ValueError("the likelihood raster has no CRS; city blocks need a projected CRS "
-                         "in metres (or feet) to measure the 80 m neighbourhood")
+        raise GisroadsError("the likelihood raster has no CRS; city blocks need a projected "
+                            "CRS in metres (or feet) to measure the 80 m neighbourhood")
     if crs.is_geographic:
-        raise ValueError(f"the likelihood raster is in a geographic CRS ({crs.name}); "
-                         "reproject it to a projected CRS in metres")
+        raise GisroadsError(f"the likelihood raster is in a geographic CRS ({crs.name}); "
+                            "reproject it to a projected CRS in metres")
     return float(crs.axis_info[0].unit_conversion_factor)
 
 
@@ -108,19 +109,19 @@ def road_likelihood(raster: GeoRaster, *, l_max: float = L_MAX,
     if data.ndim == 3:
         data = np.fmax.reduce(data, axis=0) if len(data) else np.full(data.shape[1:], np.nan)
     if data.ndim != 2:
-        raise ValueError(f"a likelihood raster is (rows, cols) or (bands, rows, cols), "
-                         f"got shape {data.shape}")
+        raise GisroadsError(f"a likelihood raster is (rows, cols) or (bands, rows, cols), "
+                            f"got shape {data.shape}")
     valid = np.isfinite(data)
     if not valid.any():
-        raise ValueError("the likelihood raster has no valid cell (all NaN or nodata)")
+        raise GisroadsError("the likelihood raster has no valid cell (all NaN or nodata)")
     low, high = float(data[valid].min()), float(data[valid].max())
     if low < 0:
-        raise ValueError(f"a road likelihood is not negative; the raster holds {low:g}")
+        raise GisroadsError(f"a road likelihood is not negative; the raster holds {low:g}")
     if probability is None:
         probability = high <= 1.0
     if probability:
         if high > 1.0:
-            raise ValueError(f"a road probability lies in [0, 1]; the raster holds {high:g}")
+            raise GisroadsError(f"a road probability lies in [0, 1]; the raster holds {high:g}")
         data = data * l_max
     return GeoRaster(np.minimum(data, l_max), raster.transform, raster.crs)
 
@@ -152,7 +153,7 @@ def thin_points(points_xy, spacing: float) -> np.ndarray:
     """
     points = np.asarray(points_xy, dtype=float)
     if points.ndim != 2 or points.shape[1] < 2:
-        raise ValueError(f"points_xy must be (n, 2), got shape {points.shape}")
+        raise GisroadsError(f"points_xy must be (n, 2), got shape {points.shape}")
     points = points[np.isfinite(points[:, :2]).all(axis=1), :2]
     square = np.floor(points / spacing).astype(np.int64)
     offset = np.linalg.norm(points - (square + 0.5) * spacing, axis=1)
@@ -186,7 +187,7 @@ def block_nodes(likelihood: GeoRaster, *, points_xy=None,
         Node coordinates (x, y) in the raster's CRS, on valid non-road cells only.
     """
     if not sample_spacing_m > 0:
-        raise ValueError(f"sample_spacing_m must be positive, got {sample_spacing_m}")
+        raise GisroadsError(f"sample_spacing_m must be positive, got {sample_spacing_m}")
     spacing = sample_spacing_m / _metres_per_unit(likelihood.crs)
     values = np.asarray(likelihood.data, float)
     rows_n, cols_n = values.shape
@@ -228,7 +229,7 @@ def max_likelihood_between(likelihood: GeoRaster, start_xy, end_xy, *,
     start = np.asarray(start_xy, float).reshape(-1, 2)
     end = np.asarray(end_xy, float).reshape(-1, 2)
     if start.shape != end.shape:
-        raise ValueError(f"{len(start)} segment starts but {len(end)} ends")
+        raise GisroadsError(f"{len(start)} segment starts but {len(end)} ends")
     r0, c0 = _pixel_coordinates(likelihood, start)
     r1, c1 = _pixel_coordinates(likelihood, end)
     n_samples = np.ceil(np.hypot(r1 - r0, c1 - c0)).astype(np.int64) + 2
@@ -264,7 +265,7 @@ def block_affinity(likelihood: GeoRaster, nodes_xy, *, max_edge_m: float = MAX_E
         Symmetric, no diagonal.
     """
     if not max_edge_m > 0:
-        raise ValueError(f"max_edge_m must be positive, got {max_edge_m}")
+        raise GisroadsError(f"max_edge_m must be positive, got {max_edge_m}")
     nodes = np.asarray(nodes_xy, float)
     radius = max_edge_m / _metres_per_unit(likelihood.crs)
     pairs = cKDTree(nodes).query_pairs(radius, output_type="ndarray")
@@ -415,9 +416,9 @@ def city_blocks(likelihood: GeoRaster, *, points_xy=None,
         cell; non-positive spacing or edge length; ``n_blocks < 1``.
     """
     if n_blocks is not None and n_blocks < 1:
-        raise ValueError(f"n_blocks must be at least 1, got {n_blocks}")
+        raise GisroadsError(f"n_blocks must be at least 1, got {n_blocks}")
     if not 0 < road_fraction <= 1:
-        raise ValueError(f"road_fraction must lie in (0, 1], got {road_fraction}")
+        raise GisroadsError(f"road_fraction must lie in (0, 1], got {road_fraction}")
     report(progress, 0.0, "road likelihood")
     band = road_likelihood(likelihood, l_max=l_max, probability=probability)
     threshold = road_fraction * l_max
@@ -425,9 +426,9 @@ def city_blocks(likelihood: GeoRaster, *, points_xy=None,
     nodes = block_nodes(band, points_xy=points_xy, sample_spacing_m=sample_spacing_m,
                         road_threshold=threshold)
     if len(nodes) < 2:
-        raise ValueError(f"only {len(nodes)} node(s) off the roads: the likelihood marks "
-                         f"(nearly) everything as road (>= {threshold:g}), or no point of "
-                         "points_xy lies on the raster")
+        raise GisroadsError(f"only {len(nodes)} node(s) off the roads: the likelihood marks "
+                            f"(nearly) everything as road (>= {threshold:g}), or no point of "
+                            "points_xy lies on the raster")
     report(progress, 0.05, f"{len(nodes)} nodes: affinities")
     affinity = block_affinity(band, nodes, max_edge_m=max_edge_m,
                               progress=scaled(progress, 0.05, 0.6))

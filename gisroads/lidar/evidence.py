@@ -162,6 +162,7 @@ import numpy as np
 import shapely
 from scipy import ndimage
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..io.las import PointCloud
 from .intensity import auto_cell_m, image_grid, split_share
@@ -497,7 +498,7 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
     """
     xyz = np.asarray(cloud.xyz, np.float64)
     if len(xyz) == 0:
-        raise ValueError("the cloud holds no points")
+        raise GisroadsError("the cloud holds no points")
     x, y, z = xyz.T
     classes = np.asarray(cloud.classification)
     classified = use_classification and bool((classes == GROUND).any())

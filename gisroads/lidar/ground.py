@@ -63,6 +63,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from ..errors import GisroadsError
 from ..progress import Progress, report
 
 @dataclass(frozen=True)
@@ -143,7 +144,7 @@ def ground_planes(xyz, *, t_planar: float = 0.01, t_vert: float = 0.98,
     """
     xyz = np.asarray(xyz, dtype=np.float64)
     if xyz.ndim != 2 or xyz.shape[1] != 3:
-        raise ValueError(f"xyz must have shape (n, 3), not {xyz.shape}")
+        raise GisroadsError(f"xyz must have shape (n, 3), not {xyz.shape}")
     if len(xyz) == 0:
         empty = np.empty(0, np.int32)
         return GroundPlanes(empty, empty, empty.astype(np.int16), 0,
@@ -151,7 +152,7 @@ def ground_planes(xyz, *, t_planar: float = 0.01, t_vert: float = 0.98,
     if cell_m is None:
         cell_m = _default_cell_m(xyz)
     if min(max_step_m, cell_m, block_m) <= 0:
-        raise ValueError("max_step_m, cell_m and block_m must be positive")
+        raise GisroadsError("max_step_m, cell_m and block_m must be positive")
     step_m = max(max_step_m, np.sqrt(2.0) * cell_m * np.tan(np.arccos(t_vert)))
     report(progress, 0.0, "ground planes: column runs")
     runs = _Runs(xyz, cell_m=cell_m, step_m=step_m)

@@ -43,6 +43,7 @@ import shapely
 from affine import Affine
 from scipy import ndimage
 
+from ..errors import GisroadsError
 from ..features.edges import dominant_orientations
 from ..features.rectangles import (THETA2_RAD, boundary_strength, compose,
                                    interior_strength, rotate_to, rotated_features,
@@ -258,9 +259,10 @@ def _check_north_up(transform: Affine) -> None:
     """Orientations are angles on a north-up grid (see :mod:`gisroads.features.edges`), and
     the rectangles need square pixels."""
     if transform.b != 0 or transform.d != 0 or transform.e >= 0 or transform.a <= 0:
-        raise ValueError("road hypotheses need a north-up grid (no rotation, rows southward)")
+        raise GisroadsError("road hypotheses need a north-up grid (no rotation, rows "
+                            "southward)")
     if not np.isclose(transform.a, -transform.e):
-        raise ValueError("road hypotheses need square pixels")
+        raise GisroadsError("road hypotheses need square pixels")
 
 
 def _image_array(image: GeoRaster) -> np.ndarray:
@@ -268,7 +270,7 @@ def _image_array(image: GeoRaster) -> np.ndarray:
     if data.ndim == 3 and data.shape[0] == 1:
         data = data[0]
     if data.ndim != 2:
-        raise ValueError(f"expected a single-band intensity image, got shape {data.shape}")
+        raise GisroadsError(f"expected a single-band intensity image, got shape {data.shape}")
     return data
 
 
@@ -360,7 +362,7 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
     labels = np.asarray(labels, dtype=np.int32)
     magnitude = np.asarray(magnitude, dtype=np.float64)
     if labels.shape != intensity.shape or magnitude.shape != intensity.shape:
-        raise ValueError("image, magnitude, orientation and labels must have one shape")
+        raise GisroadsError("image, magnitude, orientation and labels must have one shape")
     _check_north_up(image.transform)
     cell_m = image.pixel_size
     widths_m = np.asarray(widths_m, dtype=float)
@@ -368,7 +370,7 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
     width_px = np.round(widths_m / cell_m).astype(np.int64)
     length_px = np.round(lengths_m / cell_m).astype(np.int64)
     if width_px.min(initial=2) < 2 or length_px.min(initial=1) < 1:
-        raise ValueError("windows must be at least 2 pixels wide and 1 pixel long")
+        raise GisroadsError("windows must be at least 2 pixels wide and 1 pixel long")
     band_px = max(int(round(band_m / cell_m)), 1)
     edge_band_px = max(int(round(edge_band_m / cell_m)), 1)
     snap_px = int(round(snap_m / cell_m))

@@ -40,6 +40,7 @@ from affine import Affine
 from pyproj import CRS
 from scipy import ndimage
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..io.raster import write_geotiff
 
@@ -138,16 +139,16 @@ def intensity_images(xyz, intensity, level, *, cell_m: float = 0.5, bounds=None,
     intensity = np.asarray(intensity, dtype=np.float64)
     level = np.asarray(level)
     if not (len(xyz) == len(intensity) == len(level)):
-        raise ValueError("xyz, intensity and level must have one entry per point")
+        raise GisroadsError("xyz, intensity and level must have one entry per point")
     if cell_m <= 0:
-        raise ValueError("cell_m must be positive")
+        raise GisroadsError("cell_m must be positive")
     if fill_radius_m is None:
         fill_radius_m = max(1.5, 2.5 * cell_m)
     ground = level >= 0
     n_levels = int(level.max()) + 1 if ground.any() else 0
     if bounds is None:
         if not ground.any():
-            raise ValueError("no ground point, and no bounds to make an empty image over")
+            raise GisroadsError("no ground point, and no bounds to make an empty image over")
         low, high = xyz[ground, :2].min(axis=0), xyz[ground, :2].max(axis=0)
         xmin, ymax = np.floor(low[0] / cell_m) * cell_m, np.ceil(high[1] / cell_m) * cell_m
         # Cells are closed on their west and north sides: a point on a grid line at the
@@ -164,7 +165,7 @@ def intensity_images(xyz, intensity, level, *, cell_m: float = 0.5, bounds=None,
     if single_return is not None:
         single_return = np.asarray(single_return, dtype=bool)
         if len(single_return) != len(xyz):
-            raise ValueError("single_return must have one entry per point")
+            raise GisroadsError("single_return must have one entry per point")
         gain[~single_return] = 1.0 / split_share(intensity, single_return, inside,
                                                   (level * rows + row) * cols + col)
     intensity = intensity * gain

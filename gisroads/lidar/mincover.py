@@ -65,6 +65,7 @@ import pulp
 import shapely
 from scipy.sparse import csr_matrix
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..optimize import solver, variable
 from ..progress import Progress, report
@@ -171,11 +172,11 @@ def _cover_problem(hypotheses, likelihood, *, l_max, a, seed_step_m) -> _CoverPr
     if l_max is None:
         l_max = float(np.nanmax(likelihood.data))
     if not l_max > 0:
-        raise ValueError(f"l_max must be positive, got {l_max}")
+        raise GisroadsError(f"l_max must be positive, got {l_max}")
     p = np.clip(values / l_max, 0.0, 1.0)
     width_index = hypotheses["width_index"].to_numpy(np.int64)
     if len(width_index) and (width_index.min() < 0 or width_index.max() >= len(p)):
-        raise ValueError(f"width_index outside the {len(p)} likelihood bands")
+        raise GisroadsError(f"width_index outside the {len(p)} likelihood bands")
     hyp, seed = membership.nonzero()
     cost = 1.0 - p[width_index[hyp], seed]
     seed_cost = csr_matrix((cost, (hyp, seed)), shape=membership.shape)

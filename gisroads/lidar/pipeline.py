@@ -32,6 +32,7 @@ import pandas as pd
 from rasterio.windows import Window
 import shapely
 
+from ..errors import GisroadsError
 from ..features.edges import local_energy
 from ..geo import GeoRaster, RoadNetwork
 from ..io.las import PointCloud
@@ -156,7 +157,7 @@ def extract_tile(cloud: PointCloud, tile: Tile, *, cell_m: float = 0.5,
         Ground-plane thresholds (paper section 4.1: 0.01 and 0.98).
     """
     if cloud.intensity is None:
-        raise ValueError("the point cloud records no intensity; the LiDAR method needs it")
+        raise GisroadsError("the point cloud records no intensity; the LiDAR method needs it")
     report(progress, 0.0, "ground planes")
     planes = ground_planes(cloud.xyz, t_planar=t_planar, t_vert=t_vert)
     report(progress, 0.25, "intensity images")
@@ -529,7 +530,7 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
         or for an unknown cue.
     """
     if cue not in CUES:
-        raise ValueError(f"cue must be one of {CUES}, not {cue!r}")
+        raise GisroadsError(f"cue must be one of {CUES}, not {cue!r}")
     with shared_workers():  # one cluster for the reading pass and the tiles
         parallel = dict(workers=workers, scheduler=scheduler, work_dir=work_dir)
         if cue == "evidence":
@@ -749,7 +750,7 @@ def _mosaic_grid(tiles: list[Tile], cell_m: float, bands: int) -> tuple[Affine, 
     ymax = max(t.core[3] for t in tiles)
     transform, (rows, cols) = image_grid((xmin, ymin, xmax, ymax), cell_m)
     if bands * rows * cols * 4 > MOSAIC_BUDGET_BYTES:
-        raise ValueError(
+        raise GisroadsError(
             f"a mosaic of the tiles over {xmax - xmin:.0f} m x {ymax - ymin:.0f} m at "
             f"{cell_m:g} m cells would take {bands * rows * cols * 4 / 2**30:.1f} GiB (budget "
             f"{MOSAIC_BUDGET_BYTES / 2**30:.0f} GiB): the cloud's points lie far apart; split "

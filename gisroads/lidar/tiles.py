@@ -15,6 +15,8 @@ import numpy as np
 import pandas as pd
 import shapely
 
+from ..errors import GisroadsError
+
 
 @dataclass(frozen=True)
 class Tile:
@@ -64,7 +66,7 @@ def tile_grid(extent, *, tile_m: float = 300.0, overlap_m: float = 100.0,
         it with ``points_xy``).
     """
     if not 0 <= overlap_m < tile_m:
-        raise ValueError(f"overlap_m ({overlap_m}) must be in [0, tile_m={tile_m})")
+        raise GisroadsError(f"overlap_m ({overlap_m}) must be in [0, tile_m={tile_m})")
     xmin, ymin, xmax, ymax = map(float, extent)
     stride = tile_m - overlap_m
     nx, ny = _counts(xmin, xmax, tile_m, stride), _counts(ymin, ymax, tile_m, stride)

@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 from pyproj import CRS
 
+from ..errors import GisroadsError
 from ..io.las import DEFAULT_CHUNK, LasError, PointCloud, cloud_crs, iter_las_chunks, las_info
 from ..progress import Progress, report
 from .tiles import Tile, tile_grid
@@ -285,7 +286,7 @@ def open_store(source, work_dir=None, *, tile_m: float = 300.0, overlap_m: float
         Missing, unreadable or corrupt inputs, or inputs in different CRSs.
     """
     if not 0 <= overlap_m < tile_m:
-        raise ValueError(f"overlap_m ({overlap_m}) must be in [0, tile_m={tile_m})")
+        raise GisroadsError(f"overlap_m ({overlap_m}) must be in [0, tile_m={tile_m})")
     paths = las_inputs(source)
     infos = [las_info(p) for p in paths]
     crs = inputs_crs(paths)

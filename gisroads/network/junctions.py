@@ -60,6 +60,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from shapely.ops import substring
 
+from ..errors import GisroadsError
 from ..geo import RoadNetwork, network_from_centrelines
 from ..progress import Progress, report
 # the shared noding and tangent steps of the LiDAR and snake vectorisers (private there)
@@ -107,13 +108,13 @@ _ARC_POINTS = 33         # vertices of a search semicircle's arc
 
 def _check_frame(frame, required) -> None:
     if not isinstance(frame, gpd.GeoDataFrame):
-        raise ValueError(f"expected a GeoDataFrame, got {type(frame).__name__}")
+        raise GisroadsError(f"expected a GeoDataFrame, got {type(frame).__name__}")
     missing = [c for c in required if c not in frame.columns]
     if missing:
-        raise ValueError(f"road strings lack the column(s) {missing}")
+        raise GisroadsError(f"road strings lack the column(s) {missing}")
     if frame.crs is not None and not frame.crs.is_projected:
-        raise ValueError(f"road strings must be in a projected CRS in metres, not "
-                         f"{frame.crs.name}")
+        raise GisroadsError(f"road strings must be in a projected CRS in metres, not "
+                            f"{frame.crs.name}")
 
 
 def approximate_strings(road_strings: gpd.GeoDataFrame, *,
@@ -146,17 +147,17 @@ def approximate_strings(road_strings: gpd.GeoDataFrame, *,
     """
     _check_frame(road_strings, ("width_m", "quality"))
     if tolerance_m < 0:
-        raise ValueError(f"tolerance_m must be >= 0, got {tolerance_m}")
+        raise GisroadsError(f"tolerance_m must be >= 0, got {tolerance_m}")
     frame = road_strings[~(road_strings.geometry.isna() | road_strings.geometry.is_empty)]
     kinds = set(frame.geom_type) - {"LineString", "MultiLineString"}
     if kinds:
-        raise ValueError(f"road strings must be lines, got {sorted(kinds)}")
+        raise GisroadsError(f"road strings must be lines, got {sorted(kinds)}")
     width = frame["width_m"].to_numpy(float)
     quality = frame["quality"].to_numpy(float)
     if not np.all(np.isfinite(width) & (width > 0)):
-        raise ValueError("road strings need a positive width_m (metres) on every row")
+        raise GisroadsError("road strings need a positive width_m (metres) on every row")
     if not np.all((quality >= 0) & (quality <= 1)):
-        raise ValueError("road string quality must lie in [0, 1] on every row")
+        raise GisroadsError("road string quality must lie in [0, 1] on every row")
     string_id = (frame["string_id"].to_numpy() if "string_id" in frame
                  else np.arange(len(frame), dtype=np.int64))
     merged = shapely.line_merge(frame.geometry.values)
@@ -628,10 +629,10 @@ def find_junctions(roads: gpd.GeoDataFrame, *,
         two roads').
     """
     if min_search_radius_m <= 0 or max_search_radius_m < min_search_radius_m:
-        raise ValueError("search radii must satisfy 0 < min_search_radius_m <= "
-                         "max_search_radius_m")
+        raise GisroadsError("search radii must satisfy 0 < min_search_radius_m <= "
+                            "max_search_radius_m")
     if not 0 <= collinear_deg < 90:
-        raise ValueError(f"collinear_deg must lie in [0, 90), got {collinear_deg}")
+        raise GisroadsError(f"collinear_deg must lie in [0, 90), got {collinear_deg}")
     crs = roads.crs
     if len(roads) == 0:
         return roads.copy(), _connection_frame([], roads["string_id"].dtype
@@ -840,7 +841,8 @@ def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
     """
     _check_frame(road_strings, ("width_m", "quality"))
     if crs is not None and road_strings.crs is not None and road_strings.crs != crs:
-        raise ValueError(f"road strings are in {road_strings.crs.name}, not in the given crs")
+        raise GisroadsError(f"road strings are in {road_strings.crs.name}, not in the given "
+                            "crs")
     if road_strings.crs is None and crs is not None:
         road_strings = road_strings.set_crs(crs)
     report(progress, 0.0, "approximating road strings")

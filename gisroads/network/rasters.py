@@ -56,6 +56,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster, RoadNetwork, _apply
 from ..progress import Progress, report, scaled
 from ..vectorize.ribbons import node_roads
@@ -129,26 +130,26 @@ def road_probability(raster: GeoRaster, *, band: int = 1) -> GeoRaster:
         geographic CRS (reproject to metres first).
     """
     if raster.crs is not None and not raster.crs.is_projected:
-        raise ValueError("the road raster must be in a projected CRS in metres (reproject "
-                         "it, e.g. to its UTM zone)")
+        raise GisroadsError("the road raster must be in a projected CRS in metres (reproject "
+                            "it, e.g. to its UTM zone)")
     data = np.asarray(raster.data)
     if data.ndim == 3:
         if not 1 <= band <= data.shape[0]:
-            raise ValueError(f"band {band} does not exist: the raster has {data.shape[0]}")
+            raise GisroadsError(f"band {band} does not exist: the raster has {data.shape[0]}")
         data = data[band - 1]
     elif data.ndim != 2 or band != 1:
-        raise ValueError(f"band {band} does not exist: the raster has one band")
+        raise GisroadsError(f"band {band} does not exist: the raster has one band")
     values = data.astype(np.float32)
     invalid = ~np.isfinite(values)
     if raster.nodata is not None and np.isfinite(raster.nodata):
         invalid |= data == raster.nodata
     values[invalid] = np.nan
     if invalid.all():
-        raise ValueError("the road raster holds no valid pixel (all no-data or NaN)")
+        raise GisroadsError("the road raster holds no valid pixel (all no-data or NaN)")
     low, high = np.nanmin(values), np.nanmax(values)
     if low < 0 or high > 255:
-        raise ValueError(f"road raster values must lie in 0-1 or 0-255, found {low:g} to "
-                         f"{high:g}")
+        raise GisroadsError(f"road raster values must lie in 0-1 or 0-255, found {low:g} to "
+                            f"{high:g}")
     if high > 1:
         values /= 255.0
     return GeoRaster(values, raster.transform, raster.crs)
@@ -417,7 +418,7 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
         border along the line, metres) and ``quality`` (mean probability along the line).
     """
     if tile_px < 64 or overlap_px < 0:
-        raise ValueError("tile_px must be at least 64 and overlap_px at least 0")
+        raise GisroadsError("tile_px must be at least 64 and overlap_px at least 0")
     mask_options = dict(threshold=threshold, smooth_m=smooth_m, max_hole_m2=max_hole_m2,
                         min_area_m2=min_area_m2, low_threshold=low_threshold)
     lines, width = _raw_skeleton(probability, tile_px=tile_px, overlap_px=overlap_px,

@@ -66,6 +66,7 @@ import shapely
 from affine import Affine
 from scipy import ndimage
 
+from ..errors import GisroadsError
 from ..optimize import solver, variable
 from ..progress import Progress, report, scaled
 
@@ -123,21 +124,21 @@ _STRING_COLUMNS = {"string_id": "int64", "part_ids": "object", "width_m": "float
 def _check_parts(road_parts: gpd.GeoDataFrame) -> None:
     missing = [c for c in ("part_id", "width_m", "quality") if c not in road_parts]
     if missing:
-        raise ValueError(f"road_parts lacks columns {missing}")
+        raise GisroadsError(f"road_parts lacks columns {missing}")
     if road_parts.crs is not None and road_parts.crs.is_geographic:
-        raise ValueError("road_parts must be in a projected CRS in metres, not "
-                         f"{road_parts.crs.name}")
+        raise GisroadsError("road_parts must be in a projected CRS in metres, not "
+                            f"{road_parts.crs.name}")
     kinds = set(road_parts.geom_type.dropna()) - {"LineString"}
     if kinds or road_parts.geometry.isna().any():
-        raise ValueError(f"road_parts must be LineString centre lines, found {sorted(kinds)} "
-                         "or empty geometries")
+        raise GisroadsError("road_parts must be LineString centre lines, found "
+                            f"{sorted(kinds)} or empty geometries")
     if road_parts["part_id"].duplicated().any():
-        raise ValueError("road_parts has duplicate part_id values")
+        raise GisroadsError("road_parts has duplicate part_id values")
     for column in ("width_m", "quality"):
         if not np.isfinite(road_parts[column].to_numpy(float)).all():
-            raise ValueError(f"road_parts has missing or infinite {column}")
+            raise GisroadsError(f"road_parts has missing or infinite {column}")
     if (shapely.length(road_parts.geometry.values) <= 0).any():
-        raise ValueError("road_parts has a zero-length centre line")
+        raise GisroadsError("road_parts has a zero-length centre line")
 
 
 def _empty(columns: dict, crs) -> gpd.GeoDataFrame:
@@ -160,7 +161,7 @@ def _part_ends(lines, end_window_m: float):
     outward = np.stack([start - inner_start, end - inner_end], axis=1).reshape(-1, 2)
     norm = np.linalg.norm(outward, axis=1, keepdims=True)
     if (norm == 0).any():   # a closed part: its ends coincide with their windows' ends
-        raise ValueError("road_parts has a centre line whose end has no direction (closed?)")
+        raise GisroadsError("road_parts has a centre line whose end has no direction (closed?)")
     return xy, outward / norm
 
 
@@ -433,15 +434,16 @@ def gap_context(gaps: gpd.GeoDataFrame, *, transform: Affine, ndvi=None, ndsm=No
     rasters = {"ndvi": ndvi, "ndsm": ndsm, "intensity": intensity, "rgb": rgb}
     given = {k: np.asarray(v) for k, v in rasters.items() if v is not None}
     if not given:
-        raise ValueError("gap_context needs at least one raster (ndvi, ndsm, intensity, rgb)")
+        raise GisroadsError("gap_context needs at least one raster (ndvi, ndsm, intensity, "
+                            "rgb)")
     if "rgb" in given and (given["rgb"].ndim != 3 or given["rgb"].shape[0] != 3):
-        raise ValueError(f"rgb must have shape (3, rows, cols), not {given['rgb'].shape}")
+        raise GisroadsError(f"rgb must have shape (3, rows, cols), not {given['rgb'].shape}")
     shapes = {k: v.shape[-2:] for k, v in given.items()}
     if len(set(shapes.values())) > 1 or any(v.ndim != 2 for k, v in given.items()
                                               if k != "rgb"):
-        raise ValueError(f"context rasters must be 2-D on one grid, got shapes {shapes}")
+        raise GisroadsError(f"context rasters must be 2-D on one grid, got shapes {shapes}")
     if "width_m" not in gaps:
-        raise ValueError("gaps lacks the width_m column (use gap_edges)")
+        raise GisroadsError("gaps lacks the width_m column (use gap_edges)")
     shape = next(iter(shapes.values()))
     pixel_m2 = abs(transform.a * transform.e - transform.b * transform.d)
     min_pixels = max(1, int(np.ceil(min_object_m2 / pixel_m2)))
@@ -536,7 +538,7 @@ def edge_weights(gaps: gpd.GeoDataFrame, *, weight_ranges: dict | None = None,
     values = {**RELATION_VALUES, **(relation_values or {})}
     unknown = (set(ranges) - set(WEIGHT_RANGES)) | (set(values) - set(RELATION_VALUES))
     if unknown:
-        raise ValueError(f"unknown features or relation categories {sorted(unknown)}")
+        raise GisroadsError(f"unknown features or relation categories {sorted(unknown)}")
     features = {name: gaps[name].to_numpy(float) for name in ranges if name != "quality"}
     features["quality"] = (gaps["quality_from"].to_numpy(float)
                            + gaps["quality_to"].to_numpy(float)) / 2
@@ -596,7 +598,7 @@ def select_gap_edges(gaps: gpd.GeoDataFrame, *, time_limit_s: float = 60.0
         ``attrs["optimal"]`` whether the solver proved it optimal.
     """
     if "weight" not in gaps:
-        raise ValueError("gaps lacks the weight column (use edge_weights)")
+        raise GisroadsError("gaps lacks the weight column (use edge_weights)")
     weight = gaps["weight"].to_numpy(float)
     candidates = np.flatnonzero(weight > 0)
     selected = np.zeros(len(gaps), dtype=bool)
@@ -660,9 +662,10 @@ def road_strings(road_parts: gpd.GeoDataFrame, gaps: gpd.GeoDataFrame) -> gpd.Ge
     for ends in zip(*_end_keys(chosen)):
         for part, end in ends:
             if part not in row:
-                raise ValueError(f"a selected gap edge links unknown part_id {part}")
+                raise GisroadsError(f"a selected gap edge links unknown part_id {part}")
             if (row[part], end) in link:
-                raise ValueError(f"part {part} end {end} has more than one selected gap edge")
+                raise GisroadsError(f"part {part} end {end} has more than one selected gap "
+                                    "edge")
         a, b = ((row[part], end) for part, end in ends)
         link[a], link[b] = b, a
     lines = road_parts.geometry.values
@@ -777,12 +780,12 @@ def link_road_parts(road_parts: gpd.GeoDataFrame, *, transform: Affine | None = 
     gaps = gap_edges(road_parts, **(gap_options or {}))
     if probability is not None:
         if transform is None:
-            raise ValueError("the probability raster needs its transform")
+            raise GisroadsError("the probability raster needs its transform")
         gaps = _probability_context(gaps, transform, np.asarray(probability, float), ndsm,
                                     context_options, scaled(progress, 0.1, 0.8))
     elif any(r is not None for r in (ndvi, ndsm, intensity, rgb)):
         if transform is None:
-            raise ValueError("context rasters need their transform")
+            raise GisroadsError("context rasters need their transform")
         gaps = gap_context(gaps, transform=transform, ndvi=ndvi, ndsm=ndsm,
                            intensity=intensity, rgb=rgb, progress=scaled(progress, 0.1, 0.8),
                            **(context_options or {}))

@@ -54,6 +54,7 @@ from scipy.sparse.linalg import eigsh
 from skimage.measure import label as connected_label
 from skimage.segmentation import slic
 
+from ..errors import GisroadsError
 from ..features.edges import fill_nearest
 from ..parallel import pinned_threads
 
@@ -242,13 +243,13 @@ def ncut(affinity, n_segments: int, *, seed: int = 0) -> np.ndarray:
     weights = sparse.csr_matrix(affinity, dtype=float)
     n = weights.shape[0]
     if weights.shape != (n, n):
-        raise ValueError(f"affinity must be square, got shape {weights.shape}")
+        raise GisroadsError(f"affinity must be square, got shape {weights.shape}")
     if n_segments < 1:
-        raise ValueError(f"n_segments must be at least 1, got {n_segments}")
+        raise GisroadsError(f"n_segments must be at least 1, got {n_segments}")
     if weights.nnz and (not np.isfinite(weights.data).all() or weights.data.min() < 0):
-        raise ValueError("affinity must be finite and non-negative")
+        raise GisroadsError("affinity must be finite and non-negative")
     if weights.nnz and abs(weights - weights.T).max() > 1e-9 * weights.data.max():
-        raise ValueError("affinity must be symmetric")
+        raise GisroadsError("affinity must be symmetric")
     if n == 0:
         return np.zeros(0, np.int32)
     weights.eliminate_zeros()  # an explicit 0 is no edge, for components and degrees alike
@@ -301,12 +302,14 @@ def _bands_and_valid(image, mask) -> tuple[np.ndarray, np.ndarray]:
     if bands.ndim == 2:
         bands = bands[None]
     if bands.ndim != 3:
-        raise ValueError(f"image must be (rows, cols) or (bands, rows, cols), got {bands.shape}")
+        raise GisroadsError("image must be (rows, cols) or (bands, rows, cols), got "
+                            f"{bands.shape}")
     valid = np.isfinite(bands).all(axis=0)
     if mask is not None:
         mask = np.asarray(mask, dtype=bool)
         if mask.shape != valid.shape:
-            raise ValueError(f"mask shape {mask.shape} differs from the image's {valid.shape}")
+            raise GisroadsError(f"mask shape {mask.shape} differs from the image's "
+                                f"{valid.shape}")
         valid &= ~mask
     return bands, valid
 
@@ -376,8 +379,8 @@ class _Borders:
         """Entries of a sparse matrix at every pair; 1 where it stores none."""
         stored = sparse.csr_matrix(matrix, dtype=float).tocoo()
         if stored.shape != (self.n_superpixels,) * 2:
-            raise ValueError(f"extra_affinity has shape {stored.shape}, expected "
-                             f"{(self.n_superpixels,) * 2} (one row per superpixel)")
+            raise GisroadsError(f"extra_affinity has shape {stored.shape}, expected "
+                                f"{(self.n_superpixels,) * 2} (one row per superpixel)")
         pair_keys = self.lower * self.n_superpixels + self.upper
         keys = (np.minimum(stored.row, stored.col).astype(np.int64) * self.n_superpixels
                 + np.maximum(stored.row, stored.col))
@@ -479,7 +482,7 @@ def superpixel_graph(image, *, n_superpixels: int = 3000, mask=None,
     """
     bands, valid = _bands_and_valid(image, mask)
     if not valid.any():
-        raise ValueError("the image has no valid cell")
+        raise GisroadsError("the image has no valid cell")
     superpixels, n = _consecutive(_slic_superpixels(bands, valid, n_superpixels, compactness))
     borders = _Borders.of(superpixels, n)
     return superpixels, borders.matrix(borders.length_px), _features(bands, superpixels, n)
@@ -509,12 +512,12 @@ def intervening_edge_strength(superpixels, adjacency, edge_magnitude) -> sparse.
     superpixels = np.asarray(superpixels)
     edge_magnitude = np.asarray(edge_magnitude)
     if edge_magnitude.shape != superpixels.shape:
-        raise ValueError(f"edge_magnitude shape {edge_magnitude.shape} differs from the "
-                         f"superpixels' {superpixels.shape}")
+        raise GisroadsError(f"edge_magnitude shape {edge_magnitude.shape} differs from the "
+                            f"superpixels' {superpixels.shape}")
     n = adjacency.shape[0]
     if superpixels.size and superpixels.max() >= n:
-        raise ValueError(f"superpixel id {superpixels.max()} is not below the adjacency's "
-                         f"size {n}")
+        raise GisroadsError(f"superpixel id {superpixels.max()} is not below the adjacency's "
+                            f"size {n}")
     borders = _Borders.of(superpixels, n)
     return borders.matrix(borders.max_along(edge_magnitude))
 
@@ -540,12 +543,12 @@ def value_affinity(adjacency, node_values, sigma: float) -> sparse.csr_matrix:
         Symmetric, the factor at every adjacent pair, in (0, 1].
     """
     if not sigma > 0:
-        raise ValueError(f"sigma must be positive, got {sigma}")
+        raise GisroadsError(f"sigma must be positive, got {sigma}")
     node_values = np.asarray(node_values, dtype=float)
     pairs = sparse.triu(sparse.csr_matrix(adjacency), k=1).tocoo()
     if node_values.shape != (adjacency.shape[0],):
-        raise ValueError(f"node_values has shape {node_values.shape}, expected "
-                         f"({adjacency.shape[0]},): one value per superpixel")
+        raise GisroadsError(f"node_values has shape {node_values.shape}, expected "
+                            f"({adjacency.shape[0]},): one value per superpixel")
     difference = np.nan_to_num(node_values[pairs.row] - node_values[pairs.col], nan=0.0)
     factor = np.exp(-(difference / sigma) ** 2)
     return sparse.csr_matrix((np.concatenate([factor, factor]),
@@ -609,17 +612,17 @@ def ncut_segmentation(image, *, n_segments: int = 150, n_superpixels: int = 3000
     """
     bands, valid = _bands_and_valid(image, mask)
     if not valid.any():
-        raise ValueError("the image has no valid cell")
+        raise GisroadsError("the image has no valid cell")
     if superpixels is None:
         nodes, n = _consecutive(_slic_superpixels(bands, valid, n_superpixels, compactness))
     else:  # keep the caller's ids: extra_affinity is indexed by them
         nodes = np.asarray(superpixels)
         if nodes.shape != valid.shape:
-            raise ValueError(f"superpixels shape {nodes.shape} differs from the image's "
-                             f"{valid.shape}")
+            raise GisroadsError(f"superpixels shape {nodes.shape} differs from the image's "
+                                f"{valid.shape}")
         n = int(nodes.max()) + 1
         if n == 0:
-            raise ValueError("superpixels holds no superpixel (all -1)")
+            raise GisroadsError("superpixels holds no superpixel (all -1)")
         nodes = np.where(valid, nodes, -1)
     borders = _Borders.of(nodes, n)
     mean = _features(bands, nodes, n)["mean"].reshape(n, -1)
@@ -631,8 +634,8 @@ def ncut_segmentation(image, *, n_segments: int = 150, n_superpixels: int = 3000
     if edge_magnitude is not None:
         edge_magnitude = np.asarray(edge_magnitude, dtype=float)
         if edge_magnitude.shape != valid.shape:
-            raise ValueError(f"edge_magnitude shape {edge_magnitude.shape} differs from the "
-                             f"image's {valid.shape}")
+            raise GisroadsError(f"edge_magnitude shape {edge_magnitude.shape} differs from the "
+                                f"image's {valid.shape}")
         edge = borders.max_along(edge_magnitude)
         if sigma_edge is None:
             sigma_edge = typical_scale(edge)

@@ -49,6 +49,7 @@ from affine import Affine
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 
 #: Standard lane width (RTAC 1986), metres: the unit of the extent term (Sec. 2.2-2.3).
@@ -93,9 +94,10 @@ def pca_normals(points_xyz: np.ndarray, *, k_neighbours: int = MIN_NEIGHBOURS,
     """
     xyz = np.asarray(points_xyz, float)
     if xyz.ndim != 2 or xyz.shape[1] != 3:
-        raise ValueError(f"points_xyz must have shape (n, 3), got {xyz.shape}")
+        raise GisroadsError(f"points_xyz must have shape (n, 3), got {xyz.shape}")
     if len(xyz) < k_neighbours:
-        raise ValueError(f"{len(xyz)} points: at least k_neighbours={k_neighbours} are needed")
+        raise GisroadsError(f"{len(xyz)} points: at least k_neighbours={k_neighbours} are "
+                            "needed")
     tree = cKDTree(xyz) if tree is None else tree
     _, neighbours = tree.query(xyz, k=k_neighbours)
     local = xyz[neighbours]
@@ -128,7 +130,7 @@ def step_weight(dh_m: np.ndarray, detector: str = "exp", *, dh_avg_m: float = DH
         return ((dh_m >= dh_min_m) & (dh_m <= dh_max_m)).astype(float)
     if detector == "exp":
         return np.exp(-(dh_m - dh_avg_m) ** 2 / (2 * dh_sigma_m ** 2))
-    raise ValueError(f"unknown curb detector {detector!r}; choose from {DETECTORS}")
+    raise GisroadsError(f"unknown curb detector {detector!r}; choose from {DETECTORS}")
 
 
 def curb_response(points_xyz: np.ndarray, support_normal=(0.0, 0.0, 1.0), *,
@@ -162,9 +164,9 @@ def curb_response(points_xyz: np.ndarray, support_normal=(0.0, 0.0, 1.0), *,
         In [0, 1].
     """
     if detector not in DETECTORS:
-        raise ValueError(f"unknown curb detector {detector!r}; choose from {DETECTORS}")
+        raise GisroadsError(f"unknown curb detector {detector!r}; choose from {DETECTORS}")
     if k_neighbours < 3:
-        raise ValueError("k_neighbours must be at least 3 to define a plane")
+        raise GisroadsError("k_neighbours must be at least 3 to define a plane")
     xyz = np.asarray(points_xyz, float)
     tree = cKDTree(xyz) if len(xyz) >= k_neighbours else None
     normals, neighbours = pca_normals(xyz, k_neighbours=k_neighbours, tree=tree)
@@ -290,9 +292,9 @@ def attractor_map(points_xyz: np.ndarray, line_xy: np.ndarray, plane_normal=(0.0
     xyz = np.asarray(points_xyz, float)
     line = np.asarray(line_xy, float)[:, :2]
     if len(line) < 2:
-        raise ValueError("the map line needs at least two vertices")
+        raise GisroadsError("the map line needs at least two vertices")
     if cell_m <= 0:
-        raise ValueError("cell_m must be positive")
+        raise GisroadsError("cell_m must be positive")
     transform, shape = patch_grid(line, cell_m=cell_m, reach_m=max_lanes * lane_m + cell_m)
     if curb is None:
         curb = (curb_response(xyz, plane_normal, k_neighbours=k_neighbours, detector=detector)

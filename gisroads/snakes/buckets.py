@@ -12,19 +12,21 @@ from typing import Iterator
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..errors import GisroadsError
 from ..io.las import DEFAULT_CHUNK, PointCloud, concatenate, iter_las_chunks, subset
 
 
 def iter_source(source, *, chunk_size: int = DEFAULT_CHUNK) -> Iterator[tuple[int, PointCloud]]:
     """``(offset of the chunk's first point, chunk)`` of a PointCloud or a LAS/LAZ path."""
     if chunk_size <= 0:
-        raise ValueError(f"chunk_size must be positive, got {chunk_size}")
+        raise GisroadsError(f"chunk_size must be positive, got {chunk_size}")
     if isinstance(source, PointCloud):
         for start in range(0, len(source), chunk_size):
             yield start, subset(source, slice(start, start + chunk_size))
         return
     if not isinstance(source, (str, Path)):
-        raise ValueError(f"source must be a PointCloud or a LAS/LAZ path, got {type(source)}")
+        raise GisroadsError("source must be a PointCloud or a LAS/LAZ path, got "
+                            f"{type(source)}")
     offset = 0
     for chunk in iter_las_chunks(source, chunk_size=chunk_size):
         yield offset, chunk

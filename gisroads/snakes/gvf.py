@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from ..errors import GisroadsError
+
 #: Xu & Prince use mu = 0.2 on edge maps scaled to [0, 1] (pixel units); at dt = 1 it keeps
 #: dt mu below the 1/4 of the stability bound.
 MU = 0.2
@@ -57,11 +59,11 @@ def gradient_vector_flow(edge_map: np.ndarray, *, mu: float = MU,
     """
     f = np.asarray(edge_map, dtype=float)
     if f.ndim != 2:
-        raise ValueError(f"edge_map must be 2-D, got shape {f.shape}")
+        raise GisroadsError(f"edge_map must be 2-D, got shape {f.shape}")
     if not np.isfinite(f).all():
-        raise ValueError("edge_map holds NaN or infinite values")
+        raise GisroadsError("edge_map holds NaN or infinite values")
     if not 0 < mu <= 0.25:
-        raise ValueError(f"mu must lie in (0, 0.25] for a stable iteration, got {mu}")
+        raise GisroadsError(f"mu must lie in (0, 0.25] for a stable iteration, got {mu}")
     if normalise:
         span = f.max() - f.min()
         f = (f - f.min()) / span if span > 0 else np.zeros_like(f)

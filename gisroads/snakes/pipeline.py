@@ -23,6 +23,7 @@ import shapely
 from affine import Affine
 from scipy import ndimage
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster, RoadNetwork
 from ..io.las import cloud_crs, write_classified
 from ..lidar.tagging import ROAD_SURFACE_CLASS
@@ -344,11 +345,11 @@ def _map_in_cloud_crs(cloud_path, map_lines: gpd.GeoDataFrame):
     """``(the map's non-empty lines in the cloud's metre CRS, that CRS or None)``."""
     lines = map_lines[map_lines.geometry.notna() & ~map_lines.geometry.is_empty]
     if len(lines) == 0:
-        raise ValueError("the road map holds no line")
+        raise GisroadsError("the road map holds no line")
     working, _ = cloud_crs(cloud_path)
     if working is not None:
         if lines.crs is None:
-            raise ValueError("the road map has no CRS; cannot match it to the cloud")
+            raise GisroadsError("the road map has no CRS; cannot match it to the cloud")
         lines = lines.to_crs(working)
     return lines, working
 
@@ -364,8 +365,8 @@ def _register(store, cloud_path, lines: gpd.GeoDataFrame, snap_m: float | None, 
     along = shapely.get_coordinates(shapely.segmentize(lines.geometry.values, 0.5))
     cloud, _ = read_corridor(store, along, SUPPORT_RADIUS_M + snap + 0.5)
     if len(cloud) == 0:
-        raise ValueError(f"{cloud_path}: no point lies along the map's lines; "
-                         "does the map cover the cloud?")
+        raise GisroadsError(f"{cloud_path}: no point lies along the map's lines; "
+                            "does the map cover the cloud?")
     return register_map(lines, cloud, snap_m=snap, progress=progress)
 
 
@@ -400,7 +401,7 @@ def map_patches(cloud_path, map_lines: gpd.GeoDataFrame, *, snap_m: float | None
     finally:
         store.remove()
     if not patches:
-        raise ValueError(f"{cloud_path}: no road patch holds enough points along the map")
+        raise GisroadsError(f"{cloud_path}: no road patch holds enough points along the map")
     return registered, patches, working if working is not None else lines.crs
 
 
@@ -592,7 +593,7 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
             if work_dir is None:
                 store.remove()
     if not outcomes:
-        raise ValueError(f"{cloud_path}: no road patch holds enough points along the map")
+        raise GisroadsError(f"{cloud_path}: no road patch holds enough points along the map")
     ribbons = [ribbon for ribbon, _ in outcomes]
     ribbon_levels(ribbons, clearance_m=clearance_m)
     report(progress, 0.8, "building the road network")

@@ -23,6 +23,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
+from ..errors import GisroadsError
 from ..io.las import PointCloud
 from ..progress import Progress, report
 from .buckets import GridBuckets
@@ -117,7 +118,7 @@ def _line_parts(lines: gpd.GeoDataFrame) -> tuple[list[np.ndarray], np.ndarray]:
     """2D vertex arrays of every non-degenerate LineString part, and the input row of each."""
     geoms = np.asarray(lines.geometry.values)
     if len(geoms) and not np.isin(shapely.get_type_id(geoms), (1, 5)).all():
-        raise ValueError("the road map must hold LineString or MultiLineString geometries")
+        raise GisroadsError("the road map must hold LineString or MultiLineString geometries")
     parts, row = shapely.get_parts(geoms, return_index=True)
     coords = [shapely.get_coordinates(p) for p in parts]
     keep = [i for i, c in enumerate(coords) if len(c) >= 2 and shapely.length(parts[i]) > 0]
@@ -154,10 +155,10 @@ def map_topology(lines: gpd.GeoDataFrame, *, snap_m: float = SNAP_M) -> MapTopol
     MapTopology
     """
     if snap_m <= 0:
-        raise ValueError(f"snap_m must be positive, got {snap_m}")
+        raise GisroadsError(f"snap_m must be positive, got {snap_m}")
     parts, rows = _line_parts(lines)
     if not parts:
-        raise ValueError("the road map holds no line")
+        raise GisroadsError("the road map holds no line")
     n = len(parts)
     ends = np.array([[c[0], c[-1]] for c in parts]).reshape(-1, 2)  # 2 per part
     label = _cluster(ends, snap_m)
@@ -468,9 +469,9 @@ def register_map(lines: gpd.GeoDataFrame, cloud: PointCloud, *, control_spacing_
                         ("sample_spacing_m", sample_spacing_m),
                         ("support_radius_m", support_radius_m), ("max_incline", max_incline)):
         if not value > 0:
-            raise ValueError(f"{name} must be positive, got {value}")
+            raise GisroadsError(f"{name} must be positive, got {value}")
     if len(cloud) == 0:
-        raise ValueError("the point cloud holds no point")
+        raise GisroadsError("the point cloud holds no point")
     report(progress, 0.0, "building the map topology")
     topology = map_topology(lines, snap_m=snap_m)
     samples = _sample_roads(topology, control_spacing_m, sample_spacing_m)
@@ -482,8 +483,8 @@ def register_map(lines: gpd.GeoDataFrame, cloud: PointCloud, *, control_spacing_
     sample, point = _neighbours(cloud.xyz[near, :2], samples.xy, support_radius_m)
     point = near[point]
     if len(point) == 0:
-        raise ValueError(f"no point lies within {support_radius_m} m of the map's samples; "
-                         "does the map cover the cloud (same CRS)?")
+        raise GisroadsError(f"no point lies within {support_radius_m} m of the map's samples; "
+                            "does the map cover the cloud (same CRS)?")
     z = cloud.xyz[point, 2]
 
     report(progress, 0.4, "separating levels")

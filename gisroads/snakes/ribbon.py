@@ -36,6 +36,7 @@ from scipy import ndimage
 from scipy.linalg import cho_solve_banded, cholesky_banded
 from scipy.sparse import diags
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from .attractor import LANE_M
 
@@ -71,7 +72,7 @@ def resample_line(line_xy, step_m: float = STEP_M) -> tuple[np.ndarray, np.ndarr
     keep = np.r_[True, np.hypot(*np.diff(xy, axis=0).T) > 1e-9]
     xy = xy[keep]
     if len(xy) < 2:
-        raise ValueError("the map line needs two distinct vertices")
+        raise GisroadsError("the map line needs two distinct vertices")
     stations = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]
     count = max(2, int(round(stations[-1] / step_m)) + 1)
     along = np.linspace(0.0, stations[-1], count)
@@ -169,8 +170,8 @@ def initial_ribbon(attractor: GeoRaster, line_xy, *, step_m: float = STEP_M,
     allowed = (width >= min_width_m) & (width <= max_width_m)
     right, left = right[allowed], left[allowed]
     if len(right) == 0:
-        raise ValueError("no boundary pair fits between min_width_m and max_width_m "
-                         "within reach_m of the map line")
+        raise GisroadsError("no boundary pair fits between min_width_m and max_width_m "
+                            "within reach_m of the map line")
     centre = (offsets[left] + offsets[right]) / 2
     # mean attraction strictly between the two boundaries, from cumulative sums
     cumulative = np.concatenate([np.zeros((len(points), 1)), np.cumsum(profile, axis=1)], axis=1)
@@ -227,15 +228,15 @@ def ribbon_snake(gvf_u: np.ndarray, gvf_v: np.ndarray, transform: Affine, line_x
         Whether the tolerance was met before the cap.
     """
     if gvf_u.shape != gvf_v.shape or gvf_u.ndim != 2:
-        raise ValueError("gvf_u and gvf_v must be 2-D arrays of one shape")
+        raise GisroadsError("gvf_u and gvf_v must be 2-D arrays of one shape")
     if gamma <= 0 or step_m <= 0 or max_iterations < 1:
-        raise ValueError("gamma, step_m and max_iterations must be positive")
+        raise GisroadsError("gamma, step_m and max_iterations must be positive")
     points, normals = resample_line(line_xy, step_m)
     count = len(points)
     state = np.column_stack([np.broadcast_to(np.asarray(shift0_m, float), (count,)),
                              np.broadcast_to(np.asarray(width0_m, float) / 2, (count,))])
     if not np.isfinite(state).all() or (state[:, 1] <= 0).any():
-        raise ValueError("width0_m must be positive and finite, shift0_m finite")
+        raise GisroadsError("width0_m must be positive and finite, shift0_m finite")
     state[:, 1] = np.maximum(state[:, 1], min_half_width_m)
     factor = _banded_factor(kappa * internal_matrix(count, alpha=alpha, beta=beta,
                                                     step_m=step_m)

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..errors import GisroadsError
 from ..io.las import DEFAULT_CHUNK
 from ..progress import Progress, report
 from .buckets import GridBuckets, iter_indexed, read_corridor, source_size
@@ -144,7 +145,7 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
     for name, value in (("plane_radius_m", plane_radius_m),
                         ("plane_tolerance_m", plane_tolerance_m), ("reach_m", reach_m)):
         if not value > 0:
-            raise ValueError(f"{name} must be positive, got {value}")
+            raise GisroadsError(f"{name} must be positive, got {value}")
     xyz, tangent, road_of = registered.xyz, registered.tangent, registered.road_id
     n = len(xyz)
     total = source_size(source)

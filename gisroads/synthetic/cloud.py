@@ -26,6 +26,7 @@ import numpy as np
 import shapely
 from affine import Affine
 
+from ..errors import GisroadsError
 from ..io.las import LasPointWriter, PointCloud
 from ..progress import Progress, report
 from .network import (Kind, Material, Scene, SurfaceSample, describe_surfaces,
@@ -125,7 +126,7 @@ def render_cloud(scene: Scene, *, density_per_m2: float = 10.0, seed: int = 0,
         ``scene.crs`` (also its ``source_crs``).
     """
     if density_per_m2 <= 0 or tile_m <= 0:
-        raise ValueError("density_per_m2 and tile_m must be positive")
+        raise GisroadsError("density_per_m2 and tile_m must be positive")
     pixel = label_pixel_m(density_per_m2)
     tiles = _tiles(scene.extent, tile_m)
     for index, (x0, y0, x1, y1) in enumerate(tiles):

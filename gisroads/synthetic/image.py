@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 from affine import Affine
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..io.raster import write_geotiff
 from .network import Material, Scene, describe_surfaces, rasterize_surfaces
@@ -100,7 +101,7 @@ def render_image(scene: Scene, *, pixel_m: float = 0.25, seed: int = 0
         float32 metres, ``(rows, cols)``.
     """
     if pixel_m <= 0:
-        raise ValueError("pixel_m must be positive")
+        raise GisroadsError("pixel_m must be positive")
     transform, shape = _grid(scene, pixel_m)
     image = np.empty((4, *shape), np.uint8)
     dsm = np.empty(shape, np.float32)

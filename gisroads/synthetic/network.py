@@ -55,6 +55,7 @@ import shapely
 from affine import Affine
 from pyproj import CRS
 
+from ..errors import GisroadsError
 from ..geo import RoadNetwork, line_end_degrees, network_from_centrelines
 
 FEATURES = ("cliff", "bridge", "dual_carriageway", "diagonal", "cul_de_sac", "parking",
@@ -1343,14 +1344,14 @@ def make_scene(*, seed: int = 0, size_m: tuple[float, float] = (400.0, 400.0),
     """
     width, height = map(float, size_m)
     if min(width, height) < MIN_SIZE_M:
-        raise ValueError(f"a scene needs at least {MIN_SIZE_M:.0f} x {MIN_SIZE_M:.0f} m, "
-                         f"got {width} x {height}")
+        raise GisroadsError(f"a scene needs at least {MIN_SIZE_M:.0f} x {MIN_SIZE_M:.0f} m, "
+                            f"got {width} x {height}")
     unknown = set(features) - set(FEATURES)
     if unknown:
-        raise ValueError(f"unknown features {sorted(unknown)}; choose from {FEATURES}")
+        raise GisroadsError(f"unknown features {sorted(unknown)}; choose from {FEATURES}")
     crs = CRS.from_user_input(crs)
     if not crs.is_projected or crs.axis_info[0].unit_name not in ("metre", "meter"):
-        raise ValueError(f"scenes are laid out in metres; {crs.name} is not a metre CRS")
+        raise GisroadsError(f"scenes are laid out in metres; {crs.name} is not a metre CRS")
     xmin, ymin = map(float, origin)
     extent = (xmin, ymin, xmin + width, ymin + height)
 

@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
+from ..errors import GisroadsError
 from .conflate import conflate
 
 EDITS = ("unchanged", "shifted", "width", "fake")
@@ -112,8 +113,8 @@ def _fake_lines(truth: gpd.GeoDataFrame, count: int, length_m: tuple[float, floa
         if not chosen or min(shapely.distance(candidate, chosen)) >= clearance_m:
             chosen.append(candidate)
     if len(chosen) < count:
-        raise ValueError(f"room for only {len(chosen)} of {count} fake roads "
-                         f"{clearance_m} m clear of the truth and its pavement")
+        raise GisroadsError(f"room for only {len(chosen)} of {count} fake roads "
+                            f"{clearance_m} m clear of the truth and its pavement")
     return np.array(chosen, dtype=object)
 
 
@@ -170,7 +171,7 @@ def edit_database(truth: gpd.GeoDataFrame, *, seed: int = 0, delete_share: float
     n = len(truth)
     counts = np.rint(np.array([delete_share, shift_share, width_share]) * n).astype(int)
     if counts.sum() > n:
-        raise ValueError("the deleted, shifted and re-widened shares exceed the whole")
+        raise GisroadsError("the deleted, shifted and re-widened shares exceed the whole")
     kind = np.full(n, "unchanged", dtype=object)
     order = rng.permutation(n)
     bounds = np.cumsum(counts)

@@ -48,6 +48,7 @@ import pandas as pd
 import shapely
 from pyproj import CRS, Transformer
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..progress import Progress, report
 
@@ -247,8 +248,8 @@ def _feature_ids(database: gpd.GeoDataFrame, id_field: str | None) -> pd.Series:
     if id_field is None:
         return pd.Series(database.index.to_numpy(), index=database.index, name="db_id")
     if id_field not in database.columns:
-        raise ValueError(f"the database has no field {id_field!r}; its fields are "
-                         f"{[c for c in database.columns if c != database.geometry.name]}")
+        raise GisroadsError(f"the database has no field {id_field!r}; its fields are "
+                            f"{[c for c in database.columns if c != database.geometry.name]}")
     return database[id_field].rename("db_id")
 
 
@@ -389,18 +390,18 @@ def conflate(extracted: gpd.GeoDataFrame, database: gpd.GeoDataFrame, *,
         The layers :data:`LAYERS`, in the database's CRS (see the module docstring).
     """
     if extracted.crs is None or database.crs is None:
-        raise ValueError("both the extraction and the database need a CRS")
+        raise GisroadsError("both the extraction and the database need a CRS")
     if not tolerance_m < search_m:
-        raise ValueError(f"the tolerance ({tolerance_m} m) must be below the search distance "
-                         f"({search_m} m)")
+        raise GisroadsError(f"the tolerance ({tolerance_m} m) must be below the search "
+                            f"distance ({search_m} m)")
     ids = _feature_ids(database, id_field)
     if width_field is not None and width_field not in database.columns:
-        raise ValueError(f"the database has no width field {width_field!r}")
+        raise GisroadsError(f"the database has no width field {width_field!r}")
     report(progress, 0.0, "sampling")
     crs, db_crs = _working_crs(extracted, database), CRS.from_user_input(database.crs)
     db_lines, db_row = _line_parts(database, crs)
     if len(db_lines) == 0:
-        raise ValueError("the database holds no line geometry")
+        raise GisroadsError("the database holds no line geometry")
     ext_lines, ext_row = _line_parts(extracted, crs)
     db, ext = _sample(db_lines, step_m), _sample(ext_lines, step_m)
 

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import geopandas as gpd
 
+from ..errors import GisroadsError
 from ..io.vector import list_layers
 
 
@@ -44,7 +45,7 @@ def _read_through_ogr2ogr(source: str, layer: str | None) -> gpd.GeoDataFrame:
                    source] + ([layer] if layer else [])
         done = subprocess.run(command, capture_output=True, text=True)
         if done.returncode != 0:
-            raise ValueError(f"{source}: cannot be read ({done.stderr.strip()})")
+            raise GisroadsError(f"{source}: cannot be read ({done.stderr.strip()})")
         return _read_with_fids(str(copy), "database")
 
 
@@ -72,5 +73,5 @@ def read_database(source, layer: str | None = None) -> gpd.GeoDataFrame:
         return _read_with_fids(source, layer)
     except Exception as err:  # pyogrio and Fiona raise their own error classes
         if is_file or shutil.which("ogr2ogr") is None:
-            raise ValueError(f"{source}: cannot be read as a vector layer ({err})") from None
+            raise GisroadsError(f"{source}: cannot be read as a vector layer ({err})") from None
         return _read_through_ogr2ogr(source, layer)

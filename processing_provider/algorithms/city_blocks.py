@@ -3,6 +3,7 @@ from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFile,
                        QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterLayer)
 
+from gisroads.errors import GisroadsError
 from gisroads.lidar.blocks import MAX_EDGE_M, SAMPLE_SPACING_M
 from gisroads.jobs import blocks_job
 
@@ -65,7 +66,7 @@ class CityBlocks(GisroadsAlgorithm):
                   if parameters.get("BLOCKS") not in (None, "") else None)
         with gisroads_errors():
             if raster is None:
-                raise ValueError("the likelihood raster could not be loaded")
+                raise GisroadsError("the likelihood raster could not be loaded")
             result = blocks_job(
                 raster.source(), out,
                 points_path=self.parameterAsFile(parameters, "POINTS", context) or None,

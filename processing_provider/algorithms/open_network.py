@@ -1,11 +1,11 @@
 """Open road network GeoPackage: every layer of a gisroads output, styled as stored in it."""
 import json
 
-from qgis.core import (QgsProcessingException, QgsProcessingOutputMultipleLayers,
-                       QgsProcessingOutputString, QgsProcessingParameterFile,
-                       QgsSingleSymbolRenderer, QgsCategorizedSymbolRenderer)
+from qgis.core import (QgsProcessingOutputMultipleLayers, QgsProcessingOutputString,
+                       QgsProcessingParameterFile, QgsSingleSymbolRenderer,
+                       QgsCategorizedSymbolRenderer)
 
-from ..convert import open_geopackage_layers
+from ..convert import gisroads_errors, open_geopackage_layers
 from .base import GisroadsAlgorithm
 
 
@@ -41,10 +41,8 @@ class OpenRoadNetwork(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         path = self.parameterAsFile(parameters, "INPUT", context)
-        try:
+        with gisroads_errors():
             opened = open_geopackage_layers(path)
-        except ValueError as err:
-            raise QgsProcessingException(str(err)) from None
         # QGIS puts each new layer on top: load polygons (type 2) first, points (0) last
         opened.sort(key=lambda item: -int(item[1].geometryType()))
         styles, ids = {}, []
