@@ -1,6 +1,9 @@
 """Train the bundled convolutional road model and write its model card (seeded).
 
     OMP_NUM_THREADS=2 .venv/bin/python scripts/train_road_cnn.py [--steps 3000]
+    # a further cycle from a written model (warm restart, lower peak learning rate):
+    .venv/bin/python scripts/train_road_cnn.py --init road_convnet.onnx --seed 1 \
+        --learning-rate 1e-3 --output new.onnx
 
 Reads the four labelled sources of ``../shared/data/training`` (never a benchmark image),
 holds out the tiles listed in its ``validation.txt``, resamples every tile to the working
@@ -30,7 +33,7 @@ import torch  # noqa: E402
 from gisroads.imagery.datasets import massachusetts_valid  # noqa: E402
 from gisroads.learn.convnet import DEFAULT_CONVNET_PATH  # noqa: E402
 from gisroads.learn.convnet_training import (export_onnx, model_from_arrays,  # noqa: E402
-                                             predict_tiles, state_to_arrays, train_convnet,
+                                             model_from_onnx, predict_tiles, state_to_arrays, train_convnet,
                                              working_tile)
 from gisroads.learn.scores import pixel_auc  # noqa: E402
 
@@ -111,6 +114,11 @@ def main(argv=None):
     parser.add_argument("--batch", type=int, default=12)
     parser.add_argument("--crop", type=int, default=224)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--learning-rate", type=float, default=3e-3,
+                        help="peak of the one-cycle schedule")
+    parser.add_argument("--init", type=Path,
+                        help="an .onnx written by this script to train further (its "
+                             "training is recorded in the new card)")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--work", type=Path, default=ROOT / "out" / "train_road_cnn")
     parser.add_argument("--output", type=Path, default=DEFAULT_CONVNET_PATH)
@@ -130,8 +138,10 @@ def main(argv=None):
         if step % 50 == 0:
             print(message, flush=True)
 
+    model, earlier = (model_from_onnx(args.init) if args.init else (None, None))
     model = train_convnet(train, steps=args.steps, batch=args.batch, crop_px=args.crop,
-                          seed=args.seed, progress=progress, checkpoint=checkpoint)
+                          learning_rate=args.learning_rate, seed=args.seed, model=model,
+                          progress=progress, checkpoint=checkpoint)
     seconds = time.perf_counter() - started
     scores = evaluate(model, validation)
     thresholds = list(next(iter(scores.values()))["iou"])
@@ -140,13 +150,18 @@ def main(argv=None):
     metadata = {"pixel_m": PIXEL_M, "threshold": threshold, "architecture": "RoadUNet",
                 "parameters": int(sum(v.size for v in state_to_arrays(model).values())),
                 "steps": args.steps, "batch": args.batch, "crop_px": args.crop,
-                "seed": args.seed, "training_seconds": round(seconds),
+                "seed": args.seed, "learning_rate": args.learning_rate,
+                "training_seconds": round(seconds),
                 "machine": f"{platform.processor() or platform.machine()}, "
                            f"{torch.get_num_threads()} torch threads",
                 "torch": torch.__version__, "training_tiles": len(train),
                 "validation": {s: {"tiles": v["tiles"], "auc": round(v["auc"], 3),
                                    "iou": round(v["iou"][threshold], 3)}
                                for s, v in scores.items()}}
+    if earlier is not None:
+        metadata["continued_from"] = {key: earlier.get(key) for key in (
+            "steps", "batch", "crop_px", "seed", "learning_rate", "training_seconds",
+            "continued_from")}
     export_onnx(model, args.output, metadata)
     (args.work / "validation.json").write_text(json.dumps(scores, indent=1))
     write_card(args.output.with_suffix(".md"), metadata, scores, mean_iou)
@@ -161,8 +176,11 @@ def write_card(path: Path, metadata: dict, scores: dict, mean_iou: dict) -> None
         f"- Architecture: `RoadUNet` (gisroads.learn.convnet_training), "
         f"{metadata['parameters']:,} parameters, trained from scratch.",
         f"- Working pixel size: {metadata['pixel_m']} m (images are resampled to it).",
-        f"- Training: {metadata['steps']} steps of {metadata['batch']} crops of "
-        f"{metadata['crop_px']} px, seed {metadata['seed']}, "
+        *_earlier_cycles(metadata.get("continued_from")),
+        f"- Training{' (last cycle)' if 'continued_from' in metadata else ''}: "
+        f"{metadata['steps']} steps of {metadata['batch']} crops of "
+        f"{metadata['crop_px']} px, seed {metadata['seed']}, one-cycle peak learning rate "
+        f"{metadata['learning_rate']:g}, "
         f"{metadata['training_seconds'] / 60:.0f} min on {metadata['machine']} "
         f"(torch {metadata['torch']}); {metadata['training_tiles']} tiles of four sources "
         "(ETH CIL, CIL 2022, Massachusetts crops, Dubai; see ../shared/data/training), "
@@ -182,6 +200,18 @@ def write_card(path: Path, metadata: dict, scores: dict, mean_iou: dict) -> None
               "Provenance: the training tiles state no licence except Dubai's (CC0); "
               "see ../shared/data/training/README.md.", ""]
     path.write_text("\n".join(lines))
+
+
+def _earlier_cycles(earlier: dict | None) -> list[str]:
+    """Card lines for the cycles a model was trained in before its last one, first first."""
+    cycles = []
+    while earlier:
+        cycles.insert(0, f"- Earlier cycle: {earlier['steps']} steps of {earlier['batch']} "
+                         f"crops of {earlier['crop_px']} px, seed {earlier['seed']}, one-cycle "
+                         f"peak learning rate {earlier.get('learning_rate') or 3e-3:g}, "
+                         f"{earlier['training_seconds'] / 60:.0f} min (from scratch when first).")
+        earlier = earlier.get("continued_from")
+    return cycles
 
 
 if __name__ == "__main__":

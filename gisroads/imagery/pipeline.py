@@ -44,6 +44,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster, RoadNetwork
 from ..lidar.tiles import Tile, clip_to_core, stitch_tiles, tile_grid
 from ..progress import Progress, report, scaled
@@ -126,9 +127,9 @@ def resolve_model(model):
         if name == "boosted":
             return load_model()
         if not Path(model).is_file():
-            raise ValueError(f"{model}: no such road model file (give an .onnx or .npz "
-                             "written by 'gisroads train', or one of "
-                             f"{', '.join(MODEL_NAMES)})")
+            raise GisroadsError(f"{model}: no such road model file (give an .onnx or .npz "
+                                "written by 'gisroads train', or one of "
+                                f"{', '.join(MODEL_NAMES)})")
         return load_convnet(model) if is_convnet_file(model) else load_model(model)
     raise TypeError(f"model must be a road model, a path or one of {MODEL_NAMES}, "
                     f"not {model!r}")
@@ -162,8 +163,8 @@ def resolve_context(context, model):
             return None
         return load_context_model()
     if not Path(context).is_file():
-        raise ValueError(f"{context}: no such context model file (give a .npz written by "
-                         "scripts/train_context_model.py, 'default' or 'none')")
+        raise GisroadsError(f"{context}: no such context model file (give a .npz written by "
+                            "scripts/train_context_model.py, 'default' or 'none')")
     return load_context_model(context)
 
 
@@ -190,7 +191,7 @@ def road_probability(image: GeoRaster, model="default", *, adapt: bool = True,
 
     model = resolve_model(model)
     if model is None:
-        raise ValueError("no model")
+        raise GisroadsError("no model")
     if isinstance(model, ConvNet):
         return convnet_probability(image, model, progress=progress)
     context = resolve_context(context, model)
@@ -335,8 +336,8 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
              weight_options, network_options, model, adapt, context, probability, method,
              probability_threshold, tile_px, progress) -> ImageRoads:
     if image.crs is not None and not image.crs.is_projected:
-        raise ValueError("the image must be in a projected CRS in metres (reproject it, "
-                         "e.g. to its UTM zone)")
+        raise GisroadsError("the image must be in a projected CRS in metres (reproject it, "
+                            "e.g. to its UTM zone)")
     timings = {}
     lap = _StageClock(timings)
     model = resolve_model(model)
@@ -345,7 +346,8 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
     method = method or (DEFAULT_METHOD if probability is not None or model is not None
                         else METHOD)
     if method not in (METHOD, PROBABILITY_METHOD):
-        raise ValueError(f"method must be {METHOD!r} or {PROBABILITY_METHOD!r}, not {method!r}")
+        raise GisroadsError(f"method must be {METHOD!r} or {PROBABILITY_METHOD!r}, "
+                            f"not {method!r}")
     # the papers' stages take the first-stage probability: their thresholds were set on it
     context = (resolve_context(context, model)
                if probability is None and model is not None and method == PROBABILITY_METHOD
@@ -355,11 +357,11 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
                                        progress=scaled(progress, 0.0, 0.15))
         lap("probability")
     elif probability is not None and probability.shape != image.shape:
-        raise ValueError(f"the probability {probability.shape} is not on the image grid "
-                         f"{image.shape}")
+        raise GisroadsError(f"the probability {probability.shape} is not on the image grid "
+                            f"{image.shape}")
     if method == PROBABILITY_METHOD:
         if probability is None:
-            raise ValueError(f"method {PROBABILITY_METHOD!r} needs a model")
+            raise GisroadsError(f"method {PROBABILITY_METHOD!r} needs a model")
         from ..learn.model import RoadModel
         from ..learn.training import trained_on_road_layer
         from ..network.rasters import raster_to_network
@@ -465,7 +467,7 @@ def image_tiles(image: GeoRaster, tile_px: int = TILE_PX) -> list[tuple[Tile, tu
     """
     transform = image.transform
     if transform.b != 0 or transform.d != 0:
-        raise ValueError("tiling needs a north-up image (no rotation in its transform)")
+        raise GisroadsError("tiling needs a north-up image (no rotation in its transform)")
     # whole pixels, so that tile and core borders fall on pixel borders
     overlap_px = min(round(TILE_OVERLAP_M / pixel_size_m(image)), tile_px // 3)
     tile_m, overlap_m = tile_px * image.pixel_size, overlap_px * image.pixel_size
@@ -508,7 +510,7 @@ def _tiled_road_strings(image: GeoRaster, probability: GeoRaster | None, *, tile
     to the cores with a ``tile`` column (ids are per tile)."""
     tiles = image_tiles(image, tile_px)
     if not tiles:
-        raise ValueError("the image has no valid pixel")
+        raise GisroadsError("the image has no valid pixel")
     pieces, qa, counts, record = [], {}, {"segments": 0, "road_parts": 0}, None
     for k, (tile, (rows, cols)) in enumerate(tiles):
         report(progress, k / len(tiles), f"tile {k + 1} of {len(tiles)}")

@@ -34,6 +34,7 @@ except ImportError as error:  # pragma: no cover - the message is the point
     raise ImportError("training the road model needs PyTorch: "
                       "pip install 'gisroads[train]'") from error
 
+from ..errors import GisroadsError
 from ..progress import Progress, report
 from .convnet import FINE_TUNE_STEPS, network_input, normalisation
 
@@ -371,7 +372,7 @@ def model_from_onnx(path) -> tuple[RoadUNet, dict]:
     graph = onnx.load(str(path))
     entries = {p.key: p.value for p in graph.metadata_props}
     if "gisroads_weights" not in entries:
-        raise ValueError(f"{path}: holds no gisroads weights to fine-tune")
+        raise GisroadsError(f"{path}: holds no gisroads weights to fine-tune")
     arrays = np.load(io.BytesIO(base64.b64decode(entries["gisroads_weights"])))
     model = model_from_arrays({k: arrays[k].astype(np.float32)
                                if arrays[k].dtype == np.float16 else arrays[k]
@@ -456,7 +457,7 @@ def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
                                       default_width_m=default_width_m, guard_m=guard_m,
                                       core_fraction=core_fraction)
     if not (positive & valid).any():
-        raise ValueError("no road of the layer lies on the image")
+        raise GisroadsError("no road of the layer lies on the image")
     bands = np.clip(bands, -0.5, 1.5)
     if unmapped_probability is not None:
         report(progress, 0.02, "finding the roads the layer lacks")

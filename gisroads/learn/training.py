@@ -25,6 +25,7 @@ import shapely
 from rasterio import features as rio_features
 from scipy import ndimage
 
+from ..errors import GisroadsError, MissingFileError
 from ..geo import GeoRaster
 from ..progress import Progress, report, scaled
 from . import features as ft
@@ -134,7 +135,7 @@ def read_tiles(folder) -> list[tuple[np.ndarray, np.ndarray]]:
     folder = Path(folder)
     paths = sorted((folder / "images").glob("*.png"))
     if not paths:
-        raise FileNotFoundError(f"{folder}: no images/*.png")
+        raise MissingFileError(f"{folder}: no images/*.png")
     tiles = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NotGeoreferencedWarning)
@@ -196,7 +197,7 @@ def _road_widths(roads: gpd.GeoDataFrame, width_m, width_field, default_width_m)
         return np.full(len(roads), float(width_m))
     if width_field is not None:
         if width_field not in roads.columns:
-            raise ValueError(f"the road layer has no field {width_field!r}")
+            raise GisroadsError(f"the road layer has no field {width_field!r}")
         widths = np.asarray(roads[width_field], float)
         return np.where(np.isfinite(widths) & (widths > 0), widths, default_width_m)
     return np.full(len(roads), float(default_width_m))
@@ -217,18 +218,18 @@ def layer_labels(grid: WorkGrid, roads: gpd.GeoDataFrame, *, width_m=None,
     positive, negative : ndarray of bool, shape ``grid.shape``
     """
     if guard_m < 0 or not 0 < core_fraction <= 1:
-        raise ValueError("guard_m must be >= 0 and core_fraction in (0, 1]")
+        raise GisroadsError("guard_m must be >= 0 and core_fraction in (0, 1]")
     if roads.crs is not None and grid.image.crs is not None:
         roads = roads.to_crs(grid.image.crs)
     lines = shapely.force_2d(np.asarray(roads.geometry.values, dtype=object))
     keep = ~(shapely.is_missing(lines) | shapely.is_empty(lines))
     kinds = set(shapely.get_type_id(lines[keep]).tolist())
     if not kinds <= {1, 5}:
-        raise ValueError("the road layer must hold (Multi)LineStrings")
+        raise GisroadsError("the road layer must hold (Multi)LineStrings")
     widths = _road_widths(roads, width_m, width_field, default_width_m)[keep]
     lines = lines[keep]
     if len(lines) == 0:
-        raise ValueError("the road layer has no line")
+        raise GisroadsError("the road layer has no line")
     core = shapely.buffer(lines, np.maximum(core_fraction * widths / 2, grid.pixel_m))
     guard = shapely.buffer(lines, widths / 2 + guard_m)
 
@@ -335,7 +336,7 @@ def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
                                       default_width_m=default_width_m, guard_m=guard_m,
                                       core_fraction=core_fraction)
     if not positive.any():
-        raise ValueError("no road of the layer lies on the image")
+        raise GisroadsError("no road of the layer lies on the image")
     surface, _ = layer_labels(grid, roads, width_m=width_m, width_field=width_field,
                               default_width_m=default_width_m, guard_m=guard_m,
                               core_fraction=1.0)
@@ -345,8 +346,8 @@ def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
     elif road_share == "layer":
         road_share = float(np.clip(surface_share, 0.01, 0.5))
     elif isinstance(road_share, str):
-        raise ValueError(f"road_share must be 'default', 'layer', a share or None, not "
-                         f"{road_share!r}")
+        raise GisroadsError(f"road_share must be 'default', 'layer', a share or None, not "
+                            f"{road_share!r}")
     rng = np.random.default_rng(seed)
     report(progress, 0.0, "sampling road and non-road pixels")
     passes = 1 if unmapped_probability is None else 2
@@ -412,7 +413,8 @@ def _on_work_grid(mask: np.ndarray, grid: WorkGrid) -> np.ndarray:
     pixels it covers are."""
     f = grid.factor
     if mask.shape != grid.image.shape:
-        raise ValueError(f"the mask {mask.shape} is not on the image grid {grid.image.shape}")
+        raise GisroadsError(f"the mask {mask.shape} is not on the image grid "
+                            f"{grid.image.shape}")
     if f == 1:
         return mask
     rows, cols = grid.shape
@@ -637,7 +639,7 @@ def adapted_probability(image: GeoRaster, model: RoadModel, *, weight: float | N
         weight = (LAYER_MODEL_WEIGHT if trained_on_road_layer(model)
                   else ADAPT_WEIGHT)
     if not 0 <= weight <= 1:
-        raise ValueError(f"weight must be in [0, 1], not {weight}")
+        raise GisroadsError(f"weight must be in [0, 1], not {weight}")
     grid = WorkGrid(image, cache_mb=ADAPT_CACHE_MB)
     stride = selection_stride if weight == 1 else 1
     report(progress, 0.0, "road probability of the model")
