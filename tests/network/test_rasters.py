@@ -110,6 +110,22 @@ def test_probability_scales_and_no_data():
     np.testing.assert_allclose(network.centrelines.score, 0.9, atol=0.05)
 
 
+def test_no_line_is_drawn_into_a_no_data_hole():
+    """A road running into a strip without data ends at its border: neither an end's
+    extension nor a gap edge across the strip draws a line where the image has nothing."""
+    probability = _crossing().astype(np.float32) * 0.9
+    probability[:, 250:300] = np.nan
+    raster = _raster(probability)
+    network = raster_to_network(raster)
+    (x0, _), (x1, _) = _xy(raster, 0, 250), _xy(raster, 0, 300)
+    hole = shapely.box(x0 + PIXEL_M, 0, x1 - PIXEL_M, 3000)
+    lines = network.centrelines.geometry.values
+    assert len(lines) and not shapely.intersects(lines, hole).any()
+    # the road on both sides of the strip is still drawn up to it
+    assert network.centrelines.total_bounds[2] >= _xy(raster, 0, 399)[0] - 5.0
+    assert shapely.length(shapely.intersection(lines, shapely.box(x1, 0, 3000, 3000))).sum() > 40
+
+
 def test_tiles_are_stitched_into_the_same_network():
     mask = _crossing(size=600)
     mask[100:400, 450:466] = 1          # a road crossing tile seams
