@@ -40,6 +40,27 @@ def evaluate_network(extracted, reference, *, buffer_m: float = 3.0, cell_m: flo
         ``{"buffer": {...}, "topology": {...}, "apls": {...}[, "area": {...}]}``, each a flat
         dict of Python ints and floats (undefined ratios are NaN, which ``json.dumps``
         writes as ``NaN``); the keys are those of the four metric functions.
+
+    Examples
+    --------
+    An extraction that missed the avenue, against a synthetic scene's truth:
+
+    >>> from gisroads.evaluate import evaluate_network, format_report
+    >>> from gisroads.synthetic import make_scene
+    >>> truth = make_scene(seed=0, size_m=(300, 300)).truth
+    >>> lines = truth.centrelines
+    >>> extracted = lines[lines.road_id != 2]        # road 2: the avenue
+    >>> results = evaluate_network(extracted, lines, buffer_m=3.0)
+    >>> sorted(results)
+    ['apls', 'buffer', 'topology']
+    >>> round(results["buffer"]["correctness"], 3), round(results["buffer"]["completeness"], 2)
+    (1.0, 0.87)
+    >>> print(format_report(results))
+    Buffer 3.00 m: completeness 87.4 %, correctness 100.0 %, quality 87.1 %, RMS 0.00 m
+      length: extracted 1784.04 m, reference 2084.04 m
+    Topology: components 3 extracted, 2 reference; junctions 5 extracted, 11 reference,
+      5 matched within 10.00 m (precision 100.0 %, recall 45.5 %)
+    APLS: ... %)
     """
     ext, ref, crs = metric_lines(extracted, reference, valid_area=valid_area)
     ext, ref = gpd.GeoSeries(ext, crs=crs), gpd.GeoSeries(ref, crs=crs)

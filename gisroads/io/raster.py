@@ -87,6 +87,22 @@ def read_raster(path, *, pixel_size: float | None = None, crs=None,
     RasterError
         Unreadable file, missing georeferencing without ``pixel_size``/``crs``, a ``crs``
         pyproj does not know, or a raster with no valid cell.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from gisroads.io import read_raster
+    >>> from gisroads.synthetic import make_scene, write_image
+    >>> scene = make_scene(seed=0, size_m=(300, 300))
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     write_image(scene, Path(folder) / "image.tif", Path(folder) / "dsm.tif", pixel_m=1.0)
+    ...     image = read_raster(Path(folder) / "image.tif")
+    ...     nir = read_raster(Path(folder) / "image.tif", bands=[4])
+    >>> image.data.shape, nir.data.shape, image.pixel_size
+    ((4, 300, 300), (1, 300, 300), 1.0)
+    >>> image.bounds == scene.extent and image.crs == scene.crs
+    True
     """
     path = Path(path)
     if not path.exists():

@@ -127,6 +127,22 @@ def write_geopackage(path, layers: dict[str, gpd.GeoDataFrame], *,
     Returns
     -------
     Path
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from gisroads.io import list_layers, read_layer, write_geopackage
+    >>> from gisroads.synthetic import make_scene
+    >>> truth = make_scene(seed=0, size_m=(300, 300)).truth     # a RoadNetwork
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = write_geopackage(Path(folder) / "truth.gpkg", truth.layers())
+    ...     names = list_layers(path)
+    ...     lines = read_layer(path, "road_centrelines")
+    >>> names
+    ['road_centrelines', 'road_polygons', 'junctions']
+    >>> len(lines), lines.crs.to_epsg()
+    (9, 32633)
     """
     writer = GeoPackageWriter(path, styles_dir=styles_dir)
     if not layers:

@@ -14,4 +14,27 @@ Below the methods and above the vectorisers, so no method imports another:
 :mod:`gisroads.network.rasters`
     Any road raster (a mask or a probability map) to road parts and, through the two stages
     above, to the network contract.
+
+The entry point is :func:`raster_to_network`; its stages and the network generation are
+importable from here too, each from its module on first use, so that
+``import gisroads.network`` stays cheap.
 """
+from typing import TYPE_CHECKING
+
+from .. import _lazy_exports
+
+__all__ = ["link_gaps", "link_road_parts", "parts_to_network", "raster_to_network",
+           "road_mask", "road_probability", "skeleton_parts", "strings_to_network"]
+
+__getattr__, __dir__ = _lazy_exports(__name__, {
+    **dict.fromkeys(["link_gaps", "parts_to_network", "raster_to_network", "road_mask",
+                     "road_probability", "skeleton_parts"], ".rasters"),
+    "link_road_parts": ".subgraph",
+    "strings_to_network": ".junctions",
+})
+
+if TYPE_CHECKING:
+    from .junctions import strings_to_network
+    from .rasters import (link_gaps, parts_to_network, raster_to_network, road_mask,
+                          road_probability, skeleton_parts)
+    from .subgraph import link_road_parts

@@ -155,6 +155,21 @@ def write_cloud(scene: Scene, path, *, density_per_m2: float = 10.0, seed: int =
     -------
     int
         Number of points written.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from gisroads.io import las_info
+    >>> from gisroads.synthetic import make_scene, write_cloud
+    >>> scene = make_scene(seed=0, size_m=(300, 300))
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     count = write_cloud(scene, Path(folder) / "cloud.laz", density_per_m2=2)
+    ...     info = las_info(Path(folder) / "cloud.laz")
+    >>> info["format"], info["epsg"], info["point_count"] == count
+    ('LAZ', 32633, True)
+    >>> 2 * 300 * 300 < count < 1.2 * 2 * 300 * 300  # pulses, and the canopy's last returns
+    True
     """
     xmin, ymin = scene.extent[:2]
     with LasPointWriter(path, crs=scene.crs, offset=(xmin, ymin, 0.0)) as writer:

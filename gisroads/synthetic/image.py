@@ -99,6 +99,16 @@ def render_image(scene: Scene, *, pixel_m: float = 0.25, seed: int = 0
         uint8, bands (R, G, B, NIR), shape ``(4, rows, cols)``.
     dsm : GeoRaster
         float32 metres, ``(rows, cols)``.
+
+    Examples
+    --------
+    >>> from gisroads.synthetic import make_scene, render_image
+    >>> scene = make_scene(seed=0, size_m=(300, 300))
+    >>> image, dsm = render_image(scene, pixel_m=1.0)
+    >>> image.data.shape, image.data.dtype.name, image.pixel_size
+    ((4, 300, 300), 'uint8', 1.0)
+    >>> dsm.shape == image.shape and dsm.crs == image.crs == scene.crs
+    True
     """
     if pixel_m <= 0:
         raise GisroadsError("pixel_m must be positive")

@@ -1341,6 +1341,23 @@ def make_scene(*, seed: int = 0, size_m: tuple[float, float] = (400.0, 400.0),
     Returns
     -------
     Scene
+
+    Examples
+    --------
+    >>> from gisroads.synthetic import make_scene
+    >>> scene = make_scene(seed=0, size_m=(300, 300))
+    >>> scene.extent
+    (500000.0, 4500000.0, 500300.0, 4500300.0)
+    >>> scene.roads["name"].tolist()
+    ['cliff_foot', 'cliff_top', 'avenue', 'dual_carriageway_a', 'dual_carriageway_b',
+     'curved_street', 'diagonal', 'cul_de_sac', 'bridge']
+    >>> truth = scene.truth                   # a RoadNetwork: the exact answer
+    >>> len(truth.centrelines), len(truth.junctions)
+    (9, 10)
+    >>> make_scene(seed=0, size_m=(300, 300)).roads.equals(scene.roads)  # same seed
+    True
+    >>> make_scene(seed=0, size_m=(300, 300), features=()).buildings.empty
+    True
     """
     width, height = map(float, size_m)
     if min(width, height) < MIN_SIZE_M:

@@ -38,6 +38,21 @@ def perturb_lines(lines: gpd.GeoDataFrame, *, shift_m: float = 0.0, jitter_m: fl
     Returns
     -------
     GeoDataFrame
+
+    Examples
+    --------
+    An old road map of a scene: every line 2.5 m off, and each road left off it with a
+    chance of one in five:
+
+    >>> from gisroads.evaluate import buffer_metrics
+    >>> from gisroads.synthetic import make_scene, perturb_lines
+    >>> truth = make_scene(seed=0, size_m=(300, 300)).truth.centrelines
+    >>> old_map = perturb_lines(truth, shift_m=2.5, drop_fraction=0.2, seed=1)
+    >>> len(truth), len(old_map)
+    (9, 8)
+    >>> scores = buffer_metrics(old_map, truth, buffer_m=3.0)
+    >>> round(scores.correctness, 2), round(scores.completeness, 1)
+    (1.0, 0.9)
     """
     rng = np.random.default_rng(seed)
     keep = rng.random(len(lines)) >= drop_fraction
