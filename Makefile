@@ -13,8 +13,9 @@ export OPENBLAS_NUM_THREADS := 1
 setup:
 	@scripts/setup.sh apt venv train qgis
 
+# the demo needs the standalone .venv only: no QGIS, no PostgreSQL
 setup-core:
-	@scripts/setup.sh apt venv
+	@scripts/setup.sh python venv
 
 # the benchmarks fine-tune the road network: the train extra (PyTorch) as well
 setup-bench:

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Installs everything gisroads needs on Debian 12, idempotently:
-#   apt   Debian's QGIS and the Debian Python stack QGIS embeds (see README, "Two environments")
+#   python  Debian's venv and pip: all the standalone .venv needs from Debian (make demo)
+#   apt   Debian's QGIS and the Debian Python stack QGIS embeds, PostGIS for the update
+#         tests (docs/environments.md), and what `python` installs
 #   venv  .venv: the standalone environment, modern wheels from PyPI
 #   train .venv gains the train extra (PyTorch, CPU build, and onnx) for the training tests
 #   qgis  .venv-qgis: Debian's Python with system site-packages, numpy pinned to Debian's,
@@ -11,7 +13,10 @@ cd "$(dirname "$0")/.."
 STAMPS=.stamps
 mkdir -p "$STAMPS"
 
-APT_PACKAGES=(qgis python3-qgis qgis-providers python3-skimage python3-geopandas python3-rasterio
+# the standalone .venv takes everything else as PyPI wheels (GEOS, GDAL, PROJ and CBC inside)
+VENV_APT_PACKAGES=(python3-venv python3-pip)
+
+APT_PACKAGES=("${VENV_APT_PACKAGES[@]}" qgis python3-qgis qgis-providers python3-skimage python3-geopandas python3-rasterio
   python3-sklearn python3-pulp python3-pytest python3-pip python3-venv coinor-cbc libgeos-dev build-essential
   python3-dev proj-data python3-tqdm
   # BLAS/OpenMP threads pinned inside the library (gisroads.imagery.pipeline.pinned_threads)
@@ -26,9 +31,9 @@ APT_PACKAGES=(qgis python3-qgis qgis-providers python3-skimage python3-geopandas
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 
-step_apt() {
+install_missing() {
   local missing=()
-  for p in "${APT_PACKAGES[@]}"; do
+  for p in "$@"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
   done
   [ ${#missing[@]} -eq 0 ] && return
@@ -36,6 +41,10 @@ step_apt() {
   as_root apt-get update -qq
   DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq --no-install-recommends "${missing[@]}"
 }
+
+step_python() { install_missing "${VENV_APT_PACKAGES[@]}"; }
+
+step_apt() { install_missing "${APT_PACKAGES[@]}"; }
 
 stamp_for() { echo "$STAMPS/$1-$(cat "${@:2}" | sha1sum | cut -c1-12)"; }
 
