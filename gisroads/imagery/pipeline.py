@@ -72,11 +72,8 @@ image's own model alone, 0.297 / 0.297 / 0.296; re-scored by the context model (
 since, calibrated for this threshold), 0.352 / 0.353 / 0.336."""
 DEFAULT_METHOD = PROBABILITY_METHOD
 """The path :func:`extract_image_roads` takes when given a model and no ``method``: the
-probability alone through the network stage. One ``imagery_real`` run on the 13 benchmark
-images (a test, not a choice made on them): the convolutional network's probability mean
-quality 0.440, in the papers' stages 0.298; the boosted trees' (adapted, context model)
-0.353, in the papers' stages 0.210; the papers' pipeline without a model 0.183, the naive
-baseline 0.222."""
+probability alone through the network stage (on real images it scores above the papers'
+stages fed the same probability; docs/imagery.md gives the figures)."""
 LAYER_LOW_THRESHOLD = 0.7
 """With a model trained on the image's own road layer
 (:func:`gisroads.learn.training.train_from_layer`), the probability path's road mask grows
