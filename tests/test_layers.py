@@ -13,6 +13,9 @@ Floors, bottom up (a package may import from its own floor and those below):
    ``update``;
 5. the whole jobs and the command line: ``jobs``, ``cli``.
 
+In ``cli``, the subcommand modules are siblings: each imports the shared ``options`` and
+``report`` but no other subcommand.
+
 Every import counts, also one inside a function: an import that runs only sometimes still
 ties the lower floor to the upper one.
 """
@@ -96,6 +99,18 @@ def test_no_import_goes_up_a_floor():
                               f"{own[0]} (floor {own[1]}) imports {module} "
                               f"(floor {target[1]})")
     assert upward == []
+
+
+def test_no_cli_subcommand_imports_another():
+    cli = PACKAGE / "cli"
+    shared = {"__init__", "__main__", "app", "options", "report"}
+    subcommands = {path.stem for path in cli.glob("*.py")} - shared
+    found = [f"{path.relative_to(PACKAGE.parent)}:{line}: {module}"
+             for path in sorted(cli.glob("*.py")) if path.stem in subcommands
+             for line, module in _imports(path, ("gisroads", "cli"))
+             if module.split(".")[:2] == ["gisroads", "cli"] and len(module.split(".")) > 2
+             and module.split(".")[2] in subcommands]
+    assert found == []
 
 
 @pytest.mark.parametrize("package, source, expected", [

@@ -19,7 +19,7 @@ import rasterio
 import rasterio.errors
 import shapely
 
-from gisroads.cli import _print
+from gisroads.cli.report import print_result
 from gisroads.io.vector import write_geopackage
 
 GISROADS = [sys.executable, "-m", "gisroads.cli"]
@@ -162,9 +162,10 @@ def test_a_truncated_road_map_is_a_one_line_error(lidar_dir, tmp_path):
 
 
 def test_timings_and_numbers_print_formatted(capsys):
-    _print({"roads": 3, "length_m": 392.188116950236,
-            "timings_s": {"segmentation": 0.7794340670002384, "total": 1.7867650389998744}},
-           False)
+    print_result({"roads": 3, "length_m": 392.188116950236,
+                  "timings_s": {"segmentation": 0.7794340670002384,
+                                "total": 1.7867650389998744}},
+                 False)
     assert capsys.readouterr().out.splitlines() == [
         "roads: 3", "length_m: 392.188117", "timings_s: segmentation 0.78 s, total 1.79 s"]
 

@@ -1,0 +1,6 @@
+"""``python -m gisroads.cli``: the ``gisroads`` command."""
+import sys
+
+from .app import main
+
+sys.exit(main())

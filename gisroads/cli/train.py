@@ -1,0 +1,61 @@
+"""``gisroads train``: a road model trained on an image from a road layer."""
+from pathlib import Path
+
+from .options import _positive, add_command, add_georeferencing_options, job_default
+from .report import ProgressBar, print_result
+
+
+def add_parser(subparsers) -> None:
+    p = add_command(
+        subparsers, "train", run, "train a road model on an image from a road layer",
+        "Train the learned road cue on your own image from an existing road layer over "
+        "it (e.g. last year's road database or OpenStreetMap): roads are rasterised at "
+        "their width, pixels in the core half of a road are road, pixels beyond "
+        "the road plus a guard band are non-road (the guard absorbs lines a few "
+        "metres off). An output ending in .onnx fine-tunes the convolutional network "
+        "(needs PyTorch: pip install 'gisroads[train]'); an output ending in .npz "
+        "trains gradient-boosted trees (scikit-learn) on multiscale features in metres. "
+        "Give the output to 'gisroads image --model'. Roads "
+        "missing from the layer fall among the non-road pixels, a few per cent of "
+        "them, which the models tolerate.")
+    p.add_argument("image", type=Path, help="GeoTIFF (or PNG/JPEG with --pixel and --crs)")
+    p.add_argument("roads", type=Path, help="road centre lines (GeoPackage, GeoJSON, any OGR "
+                                            "line layer, any CRS)")
+    p.add_argument("-o", "--out", type=Path, required=True,
+                   help="output model: .onnx (the network fine-tuned) or .npz (boosted trees)")
+    p.add_argument("--base", type=Path,
+                   help="with an .onnx output: the network to start from (default: the "
+                        "bundled one)")
+    p.add_argument("--steps", type=int,
+                   help="with an .onnx output: optimiser steps of 8 crops (default "
+                        "150: about two minutes for a 1500 x 1500 tile on two cores)")
+    _add_sample_options(p)
+    add_georeferencing_options(p, "an image")
+
+
+def _add_sample_options(p) -> None:
+    """What is road and what is not: road widths, the guard band, the samples."""
+    from ..jobs import train_job
+    p.add_argument("--width-field", help="field of the road layer holding each road's width "
+                                         "in metres (empty values take --width)")
+    p.add_argument("--width", type=_positive, default=job_default(train_job, "width_m"),
+                   help="road width in metres where no width field or value is given "
+                        "(default %(default)g)")
+    p.add_argument("--samples", type=int, default=job_default(train_job, "samples"),
+                   help="with an .npz output: pixels sampled from the image, half of them "
+                        "road (default %(default)s)")
+    p.add_argument("--seed", type=int, default=job_default(train_job, "seed"),
+                   help="random seed (default %(default)s)")
+    p.add_argument("--guard", type=float, default=job_default(train_job, "guard_m"),
+                   help="guard band beyond the road edge, metres, with no non-road sample "
+                        "(default %(default)g: OpenStreetMap lines are often 2-5 m off)")
+
+
+def run(args) -> int:
+    from ..jobs import train_job
+    result = train_job(args.image, args.roads, args.out, width_field=args.width_field,
+                       width_m=args.width, guard_m=args.guard, pixel_m=args.pixel,
+                       crs=args.crs, samples=args.samples, seed=args.seed,
+                       base=args.base, steps=args.steps, progress=ProgressBar(not args.json))
+    print_result(result, args.json)
+    return 0
