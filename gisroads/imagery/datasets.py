@@ -290,13 +290,17 @@ def _utm_grid(bounds, crs, pixel_m: float):
 
 
 def warp_to_utm(path, pixel_m: float, *, resampling=Resampling.bilinear,
-                nodata: float = 0) -> tuple[GeoRaster, shapely.Geometry]:
+                nodata: float | None = 0) -> tuple[GeoRaster, shapely.Geometry]:
     """A geographic GeoTIFF warped onto a square ``pixel_m`` grid in its UTM zone.
+
+    ``nodata`` is the source's no-data value; None when it has none: then the raster is
+    warped as float32 with NaN outside the source footprint only, so that a mask's zeros
+    or an image's black pixels stay data.
 
     Returns
     -------
     raster : GeoRaster
-        ``nodata`` outside the source footprint.
+        ``nodata`` (NaN when None) outside the source footprint.
     footprint : shapely Polygon
         The source image's footprint in the UTM CRS, within the new grid.
     """
@@ -306,6 +310,8 @@ def warp_to_utm(path, pixel_m: float, *, resampling=Resampling.bilinear,
     if not crs.is_geographic:
         raise GisroadsError(f"{path}: expected a geographic CRS, got {crs.name}")
     utm, transform, shape, footprint = _utm_grid(tuple(bounds), crs, pixel_m)
+    if nodata is None:
+        data, nodata = data.astype(np.float32), np.nan
     warped = np.full((len(data), *shape), nodata, dtype=data.dtype)
     reproject(source=data, destination=warped, src_transform=src_transform, src_crs=src_crs,
               dst_transform=transform, dst_crs=utm.to_wkt(), resampling=resampling,

@@ -163,6 +163,5 @@ def read_image(path, *, pixel_m: float | None = None, crs=None) -> tuple[GeoRast
     lat = np.radians((south + north) / 2.0)
     metres_per_pixel = np.sqrt((east - west) / cols * 111_320.0 * np.cos(lat)
                                * (north - south) / rows * 110_540.0)
-    warped, _ = warp_to_utm(path, round(float(metres_per_pixel), 2),
-                            nodata=raster.nodata if raster.nodata is not None else 0)
+    warped, _ = warp_to_utm(path, round(float(metres_per_pixel), 2), nodata=raster.nodata)
     return warped, raster.crs

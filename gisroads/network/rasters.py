@@ -543,7 +543,9 @@ def _rejected(raw_lines, kept_lines, crs) -> gpd.GeoDataFrame:
 
 
 def _observed(probability: GeoRaster):
-    """The area of a raster's valid (finite) pixels as a polygon; None when all are."""
+    """The area of a raster's valid (finite) pixels, grown by a pixel so that a line along
+    a staircase border (a reprojected raster's edge) is not cut into pieces; None when all
+    pixels are valid."""
     from rasterio import features
 
     valid = np.isfinite(probability.data)
@@ -551,7 +553,8 @@ def _observed(probability: GeoRaster):
         return None
     shapes = [shapely.geometry.shape(geom) for geom, _ in features.shapes(
         valid.astype(np.uint8), mask=valid, transform=probability.transform)]
-    return shapely.union_all(shapes) if shapes else shapely.Polygon()
+    area = shapely.union_all(shapes) if shapes else shapely.Polygon()
+    return shapely.buffer(area, probability.pixel_size, join_style="mitre")
 
 
 def _clip_to_extent(network: RoadNetwork, extent) -> None:
