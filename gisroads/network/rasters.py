@@ -59,6 +59,7 @@ from scipy.sparse.csgraph import connected_components
 from ..errors import GisroadsError
 from ..geo import GeoRaster, RoadNetwork, _apply
 from ..progress import Progress, report, scaled
+from ..vectorize.regions import segment_polygons
 from ..vectorize.ribbons import node_roads
 from ..vectorize.skeleton import skeleton_lines
 from .cuts import MAX_CUT_M, bridge_cuts
@@ -546,15 +547,13 @@ def _observed(probability: GeoRaster):
     """The area of a raster's valid (finite) pixels, grown by a pixel so that a line along
     a staircase border (a reprojected raster's edge) is not cut into pieces; None when all
     pixels are valid."""
-    from rasterio import features
-
     valid = np.isfinite(probability.data)
     if valid.all():
         return None
-    shapes = [shapely.geometry.shape(geom) for geom, _ in features.shapes(
-        valid.astype(np.uint8), mask=valid, transform=probability.transform)]
-    area = shapely.union_all(shapes) if shapes else shapely.Polygon()
-    return shapely.buffer(area, probability.pixel_size, join_style="mitre")
+    area = segment_polygons(np.where(valid, 0, -1).astype(np.int32), 1,
+                            probability.transform)[0]
+    return shapely.buffer(area if area is not None else shapely.Polygon(),
+                          probability.pixel_size, join_style="mitre")
 
 
 def _clip_to_extent(network: RoadNetwork, extent) -> None:
