@@ -78,7 +78,7 @@ def _stages(cloud: str, work: str, out: str, workers: int) -> dict:
         if stage:
             marks.setdefault(stage, time.perf_counter())
             marks[f"{stage}_last"] = time.perf_counter()
-    result = lidar_job(cloud, out, work_dir=work, workers=workers, progress=mark)
+    result = lidar_job(cloud, out, cue="intensity", work_dir=work, workers=workers, progress=mark)
     total_s = time.perf_counter() - start
     end = time.perf_counter()
     tiles_end = marks.get("tiles_last", end)

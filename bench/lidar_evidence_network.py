@@ -306,7 +306,7 @@ def main():
                 path = args.out / f"{name}.laz"
                 write_cloud(make_scene(seed=0, size_m=(300.0, 300.0), **SYNTHETIC[name]),
                             path, density_per_m2=8.0, seed=0)
-            paper = extract_roads(path).network.centrelines
+            paper = extract_roads(path, cue="intensity").network.centrelines
         evidences = {}
         for variant in names:
             rule, _, run = VARIANTS[variant]

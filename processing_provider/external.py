@@ -109,7 +109,8 @@ class ExternalLidarRoadNetwork(QgsProcessingAlgorithm):
 
     def shortHelpString(self):  # noqa: N802
         return ("<p>Extracts the road network of an airborne LiDAR point cloud (LAS/LAZ) "
-                "following Zhu &amp; Mordohai, by running the external gisroads command "
+                "(by default every cue the cloud carries; Zhu &amp; Mordohai's intensity cue "
+                "alone on request), by running the external gisroads command "
                 f"(<code>{self.executable} lidar</code>): QGIS's Python lacks the packages "
                 "gisroads needs, so this runs in that command's own environment. Output: a "
                 "GeoPackage with road_centrelines, road_polygons, junctions and QA layers, "
@@ -122,10 +123,13 @@ class ExternalLidarRoadNetwork(QgsProcessingAlgorithm):
         params = [
             (QgsProcessingParameterFile("INPUT", "Point cloud (LAS/LAZ)",
                                         fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)"),
-             "airborne LiDAR with intensity; feet are converted to metres"),
-            (QgsProcessingParameterEnum("CUE", "Road cue", self.CUES, defaultValue=0),
-             "intensity: the paper's rectangles on the ground intensity; evidence: the road "
-             "likelihood of every cue the cloud carries, through the network stage"),
+             "airborne LiDAR (the intensity cue needs intensity); feet are converted to "
+             "metres"),
+            (QgsProcessingParameterEnum("CUE", "Road cue", self.CUES,
+                                        defaultValue=self.CUES.index("evidence")),
+             "evidence (default): the road likelihood of every cue the cloud carries (the "
+             "paper's intensity among them), through the network stage; intensity: the "
+             "paper's rectangles on the ground intensity alone"),
             (QgsProcessingParameterFileDestination("OUTPUT", "Road network",
                                                    "GeoPackage (*.gpkg)"),
              "GeoPackage receiving every layer, in the cloud's CRS"),

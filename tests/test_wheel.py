@@ -103,7 +103,7 @@ def test_installed_wheel_runs_the_demo_with_styled_outputs(installed, tmp_path):
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr[-3000:]
     result = json.loads(run.stdout)
-    gpkgs = [Path(result[key]["gpkg"]) for key in ("image", "lidar", "lidar_evidence")]
+    gpkgs = [Path(result[key]["gpkg"]) for key in ("image", "lidar", "lidar_intensity")]
     repo_styles = {p.stem: p.read_text(encoding="utf-8") for p in (REPO / "styles").glob("*.qml")}
     for gpkg in gpkgs:
         gpkg = gpkg if gpkg.is_absolute() else tmp_path / gpkg

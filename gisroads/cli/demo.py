@@ -19,16 +19,16 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     from ..jobs import demo_job
     result = demo_job(args.out, progress=ProgressBar(not args.json))
-    image, lidar, evidence = result["image"], result["lidar"], result["lidar_evidence"]
+    image, lidar, intensity = result["image"], result["lidar"], result["lidar_intensity"]
     print_result(result, args.json, "\n".join([
         f"imagery (SpaceNet Paris tile): {image['roads']} roads, {image['length_m']:.0f} m, "
         f"{image['junctions']} junctions, cues {image['cues']}",
         "scored against OpenStreetMap's centre lines (2-5 m off the road centres):",
         result["image_report"], "",
-        f"LiDAR (IGN LiDAR HD tile): {lidar['roads']} roads, {lidar['length_m']:.0f} m, "
-        f"{lidar['junctions']} junctions",
-        f"LiDAR, evidence cue (beyond the paper): {evidence['roads']} roads, "
-        f"{evidence['length_m']:.0f} m, {evidence['junctions']} junctions",
+        f"LiDAR (IGN LiDAR HD tile), every cue it carries ({lidar['cues']}): "
+        f"{lidar['roads']} roads, {lidar['length_m']:.0f} m, {lidar['junctions']} junctions",
+        f"LiDAR, the paper's intensity cue alone: {intensity['roads']} roads, "
+        f"{intensity['length_m']:.0f} m, {intensity['junctions']} junctions",
         f"outputs in {args.out}/: image_roads.gpkg/.png, lidar_roads.gpkg/.png, "
-        "lidar_evidence_roads.gpkg/.png"]))
+        "lidar_intensity_roads.gpkg/.png"]))
     return 0

@@ -36,10 +36,10 @@ def _add_cue_options(p) -> None:
     from ..jobs import lidar_job
     from ..lidar.pipeline import CUES
     p.add_argument("--cue", choices=CUES, default=job_default(lidar_job, "cue"),
-                   help="intensity: the paper's rectangles on the ground intensity "
-                        "(default); evidence: the road likelihood of every cue the cloud "
+                   help="evidence (default): the road likelihood of every cue the cloud "
                         "carries (intensity, height above the terrain, density, roughness, "
-                        "slope, returns, classification) through the network stage")
+                        "slope, returns, classification, kerbs) through the network stage; "
+                        "intensity: the paper's rectangles on the ground intensity alone")
     p.add_argument("--threshold", type=float, default=job_default(lidar_job, "threshold"),
                    help="with --cue evidence: road likelihood at which a cell is road "
                         "(0-1, default %(default)g)")

@@ -31,9 +31,9 @@ def demo_job(out_dir, *, data_dir=None, progress: Progress = None) -> dict:
       OpenStreetMap centre lines (``image_roads.gpkg``, ``image_roads.png``,
       ``image_evaluation.json``);
     * the LiDAR pipeline on a thinned IGN LiDAR HD tile of a town (1 km², 0.29 points/m²,
-      processed at the coarser cell its density allows) with the paper's intensity cue
-      (``lidar_roads.gpkg``, ``lidar_roads.png``) and with the evidence cue
-      (``lidar_evidence_roads.gpkg``, ``lidar_evidence_roads.png``).
+      processed at the coarser cell its density allows) with the default cue, every cue the
+      cloud carries (``lidar_roads.gpkg``, ``lidar_roads.png``), and with the paper's
+      intensity cue alone (``lidar_intensity_roads.gpkg``, ``lidar_intensity_roads.png``).
     """
     data, out = Path(demo_dir() if data_dir is None else data_dir), Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -46,10 +46,10 @@ def demo_job(out_dir, *, data_dir=None, progress: Progress = None) -> dict:
     (out / "image_evaluation.json").write_text(to_json(evaluation))
     lidar = lidar_job(data / DEMO_CLOUD, out / "lidar_roads.gpkg",
                       quicklook=out / "lidar_roads.png", progress=scaled(progress, 0.3, 0.85))
-    evidence = lidar_job(data / DEMO_CLOUD, out / "lidar_evidence_roads.gpkg", cue="evidence",
-                         quicklook=out / "lidar_evidence_roads.png",
-                         progress=scaled(progress, 0.85, 1.0))
+    intensity = lidar_job(data / DEMO_CLOUD, out / "lidar_intensity_roads.gpkg",
+                          cue="intensity", quicklook=out / "lidar_intensity_roads.png",
+                          progress=scaled(progress, 0.85, 1.0))
     report(progress, 1.0, "done")
     return {"image": image, "image_evaluation": evaluation,
             "image_report": format_report(evaluation), "lidar": lidar,
-            "lidar_evidence": evidence}
+            "lidar_intensity": intensity}

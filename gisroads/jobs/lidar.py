@@ -87,8 +87,9 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
                      progress=scaled(progress, 0.8, 0.9))
         _warn_if_no_road(network, cloud_path)
         working, _ = inputs_crs(inputs)
-        result = {**network_summary(out_path, network), "tiles": len(roads.tiles),
-                  "cue": cue, "input_files": len(inputs),
+        result = {**network_summary(out_path, network),
+                  "tiles": roads.run.get("with_points", len(roads.tiles)), "cue": cue,
+                  "input_files": len(inputs),
                   "tiles_run": roads.run.get("tiles", 0),
                   "tiles_reused": roads.run.get("reused", 0)}
         if roads.cues:

@@ -418,6 +418,7 @@ def _evidence_from_store(store: TileStore, *, cell_m, min_points, workers, sched
                               progress=scaled(progress, first / len(tiles), 1.0), run=run)
     report(progress, 1.0, "road evidence done")
     pieces = [(tile, r[0]) for tile, r in zip(tiles, results) if r is not None]
+    run["with_points"] = len(pieces)
     if not pieces:
         return EvidenceMosaic(None, None, {}, {})
     _, _, used, missing = next(r for r in results if r is not None)
@@ -461,7 +462,7 @@ def _evidence_roads(path, *, threshold: float, network_options: dict | None,
     return LidarRoads(network, None, evidence=likelihood, cues=used, run=run)
 
 
-def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
+def extract_roads(path, *, cue: str = "evidence", tile_m: float = 300.0,
                   overlap_m: float = 100.0, cell_m: float | None = None,
                   widths_m=DEFAULT_WIDTHS_M, lengths_m=DEFAULT_LENGTHS_M,
                   n_segments: int = 150, t_planar: float = 0.01, t_vert: float = 0.98,
@@ -479,9 +480,12 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
     path : str or Path, or a list of them
         A LAS/LAZ file, several, a folder of them or a glob (``"tiles/*.laz"``): tiles of
         one area in one CRS; where files overlap, a tile holds the points of each.
-    cue : {"intensity", "evidence"}
-        ``intensity``: Zhu & Mordohai's Algorithm 1; ``evidence``: the road likelihood of
-        every cue the cloud carries through the network stage (module docstring).
+    cue : {"evidence", "intensity"}
+        ``evidence`` (the default, beyond the paper): the road likelihood of every cue the
+        cloud carries (the paper's ground intensity among them, and height, density,
+        roughness, slope, returns, classification, kerbs, whichever the file has) through
+        the network stage (module docstring); ``intensity``: Zhu & Mordohai's Algorithm 1
+        alone.
     tile_m, overlap_m : float
         Tile side and overlap with each neighbour, metres (paper: 300 m and 100 m).
     cell_m : float, optional
@@ -542,9 +546,9 @@ def extract_roads(path, *, cue: str = "intensity", tile_m: float = 300.0,
     >>> with tempfile.TemporaryDirectory() as folder:
     ...     cloud = Path(folder) / "cloud.laz"
     ...     points = write_cloud(scene, cloud, density_per_m2=4)
-    ...     roads = extract_roads(cloud)                  # the paper's intensity cue
-    ...     evidence = extract_roads(cloud, cue="evidence")  # beyond the paper
-    >>> network = roads.network                           # centre lines, polygons, junctions
+    ...     roads = extract_roads(cloud, cue="intensity")  # the paper's intensity cue
+    ...     evidence = extract_roads(cloud)             # every cue: beyond the paper
+    >>> network = roads.network                         # centre lines, polygons, junctions
     >>> network.crs == scene.crs, sorted(network.qa)
     (True, ['hypotheses', 'rectangles'])
     >>> scores = buffer_metrics(network.centrelines, scene.truth.centrelines, buffer_m=3.0)

@@ -17,33 +17,38 @@ class LidarRoadNetwork(GisroadsAlgorithm):
     DISPLAY_NAME = "LiDAR road network (Zhu & Mordohai)"
     GROUP = "LiDAR"
     HELP = (
-        "<p>Extracts the road network of an airborne LiDAR point cloud (LAS/LAZ with "
-        "intensity) following Zhu &amp; Mordohai: ground planes on several levels (a road "
-        "under a bridge and the bridge are both found), a 0.5 m intensity image per level, "
-        "local-energy edges and a normalized-cut segmentation, rectangle road hypotheses "
-        "scored by boundary and interior filters, likelihood maps per road width, and a "
-        "minimum cover that picks the fewest rectangles explaining them.</p>"
+        "<p>Extracts the road network of an airborne LiDAR point cloud (LAS/LAZ). By "
+        "default (the <i>evidence</i> cue, beyond the paper) the road likelihood of every "
+        "cue the cloud carries (ground intensity, height above the terrain, density, "
+        "roughness, slope, returns, the file's classification, kerbs) goes through the "
+        "network stage (Road raster to network): gaps are bridged, junctions built and "
+        "curved roads followed; car-park aisles and shores are left out. The QA layers are "
+        "gap_edges, junction_connections and rejected, and the raster folder receives "
+        "road_evidence.tif.</p>"
+        "<p>The <i>intensity</i> cue follows Zhu &amp; Mordohai alone (the cloud needs "
+        "intensity): ground planes on several levels (a road under a bridge and the bridge "
+        "are both found), a 0.5 m intensity image per level, local-energy edges and a "
+        "normalized-cut segmentation, rectangle road hypotheses scored by boundary and "
+        "interior filters, likelihood maps per road width, and a minimum cover that picks "
+        "the fewest rectangles explaining them; its QA layers are rectangles (selected) and "
+        "hypotheses (all valid windows).</p>"
         "<p>The cloud is read once into overlapping tiles, which run in parallel (one "
-        "worker process per core by default); roads are joined across tile seams. Output: a GeoPackage in the cloud's CRS with road_centrelines (width_m), "
-        "road_polygons, junctions and the QA layers rectangles (selected) and hypotheses "
-        "(all valid windows).</p>"
-        "<p>With the <i>evidence</i> cue (beyond the paper) the road likelihood of every cue "
-        "the cloud carries (Road evidence raster) goes through the network stage (Road "
-        "raster to network) instead: gaps are bridged, junctions built and curved roads "
-        "followed; the QA layers are then gap_edges, junction_connections and rejected, and "
-        "the raster folder receives road_evidence.tif.</p>")
+        "worker process per core by default); roads are joined across tile seams. Output: "
+        "a GeoPackage in the cloud's CRS with road_centrelines (width_m), road_polygons and "
+        "junctions.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         double = QgsProcessingParameterNumber.Double
         widths = ",".join(f"{w:g}" for w in DEFAULT_WIDTHS_M)
         lengths = ",".join(f"{v:g}" for v in DEFAULT_LENGTHS_M)
         params = [
-            (cloud_input(self.tr, "airborne LiDAR with intensity; feet are converted to "
-                                  "metres"), None),
+            (cloud_input(self.tr, "airborne LiDAR (the intensity cue needs intensity); feet "
+                                  "are converted to metres"), None),
             (QgsProcessingParameterEnum("CUE", self.tr("Road cue"), list(CUES),
-                                        defaultValue=0),
-             "intensity: the paper's rectangles on the ground intensity; evidence: the road "
-             "likelihood of every cue the cloud carries, through the network stage"),
+                                        defaultValue=CUES.index(stage_default(lidar_job, "cue"))),
+             "evidence (default): the road likelihood of every cue the cloud carries (the "
+             "paper's intensity among them), through the network stage; intensity: the "
+             "paper's rectangles on the ground intensity alone"),
             (QgsProcessingParameterNumber("THRESHOLD", self.tr("Evidence threshold"), double,
                                           EVIDENCE_THRESHOLD, minValue=0.0, maxValue=1.0),
              "evidence cue only: road likelihood at which a cell is road"),

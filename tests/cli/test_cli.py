@@ -103,19 +103,22 @@ def test_lidar_writes_network_tagged_cloud_and_quicklook(tmp_path):
                 density_per_m2=3.0)
     result = gisroads("lidar", tmp_path / "c.laz", "-o", tmp_path / "roads.gpkg",
                       "--tagged-las", tmp_path / "tagged.laz", "--quicklook",
-                      tmp_path / "roads.png", "--lengths", "40,80,150", "--json")
+                      tmp_path / "roads.png", "--json")
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary["roads"] > 0 and summary["tagged_points"] > 1000
+    # the default cue: every cue the cloud carries, the paper's intensity among them
+    assert summary["cue"] == "evidence" and "intensity" in summary["cues"].split(",")
     assert list_layers(tmp_path / "roads.gpkg") == [
-        "road_centrelines", "road_polygons", "junctions", "rectangles", "hypotheses"]
+        "road_centrelines", "road_polygons", "junctions", "junction_connections", "gap_edges",
+        "rejected"]
     tagged = read_las(tmp_path / "tagged.laz")
     assert (tagged.classification == 11).sum() == summary["tagged_points"]
     assert (tmp_path / "roads.png").stat().st_size > 10_000
 
 
-def test_lidar_on_a_forest_plot_writes_empty_layers_and_warns(lidar_dir, tmp_path):
-    forest = lidar_dir / "Megaplot.laz"  # 227 m x 234 m of forest: no road, under a tile
+def test_lidar_on_a_cloud_without_roads_writes_empty_layers_and_warns(lidar_dir, tmp_path):
+    forest = lidar_dir / "crop_1.laz"  # buildings and trees, no public road, under a tile
     result = gisroads("lidar", forest, "-o", tmp_path / "roads.gpkg", "--tagged-las",
                       tmp_path / "tagged.laz", "--quicklook", tmp_path / "roads.png", "--json")
     assert result.returncode == 0, result.stderr
@@ -124,7 +127,8 @@ def test_lidar_on_a_forest_plot_writes_empty_layers_and_warns(lidar_dir, tmp_pat
     assert result.stderr.strip() == (f"gisroads: warning: no road found in {forest}; "
                                      "wrote empty layers")
     assert list_layers(tmp_path / "roads.gpkg") == [
-        "road_centrelines", "road_polygons", "junctions", "rectangles", "hypotheses"]
+        "road_centrelines", "road_polygons", "junctions", "junction_connections", "gap_edges",
+        "rejected"]
     assert_empty_road_layers(tmp_path / "roads.gpkg")
     assert (tmp_path / "roads.png").stat().st_size > 10_000
     # a corrupt cloud is still an error that writes nothing
@@ -150,12 +154,14 @@ def test_demo_runs_both_pipelines_on_the_bundled_data(tmp_path):
     # the papers' pipeline alone 0.23 / 0.40)
     buffer = demo["image_evaluation"]["buffer"]
     assert buffer["completeness"] > 0.3 and buffer["correctness"] > 0.55
-    assert demo["lidar"]["roads"] >= 5 and demo["lidar"]["length_m"] > 500
-    # the evidence cue finds the town's street network: measured 16.4 km, 180 junctions
-    evidence = demo["lidar_evidence"]
-    assert evidence["cue"] == "evidence" and evidence["length_m"] > 10_000
-    assert evidence["junctions"] >= 100
-    for name in ("image_roads", "lidar_roads", "lidar_evidence_roads"):
+    # the default (evidence) cue finds the town's street network: measured 16.4 km, 180
+    # junctions; the paper's cue alone a few fragments
+    lidar = demo["lidar"]
+    assert lidar["cue"] == "evidence" and lidar["length_m"] > 10_000
+    assert lidar["junctions"] >= 100
+    assert demo["lidar_intensity"]["cue"] == "intensity"
+    assert demo["lidar_intensity"]["roads"] >= 5 and demo["lidar_intensity"]["length_m"] > 500
+    for name in ("image_roads", "lidar_roads", "lidar_intensity_roads"):
         assert list_layers(tmp_path / f"{name}.gpkg")[:3] == ["road_centrelines",
                                                               "road_polygons", "junctions"]
         assert (tmp_path / f"{name}.png").stat().st_size > 50_000

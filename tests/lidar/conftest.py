@@ -17,4 +17,4 @@ def tiled_cloud(tmp_path_factory):
 @pytest.fixture(scope="session")
 def tiled_network(tiled_cloud):
     """The intensity cue's network of an uninterrupted run, tiles one after another here."""
-    return extract_roads(tiled_cloud)
+    return extract_roads(tiled_cloud, cue="intensity")

@@ -73,7 +73,9 @@ def test_a_yard_smaller_than_a_tile_finds_its_road(scene_points, tmp_path):
     truth = scene.truth.centrelines.clip(shapely.box(*yard))
     assert truth.length.sum() > 100  # the yard holds roads
     scores = buffer_metrics(lines, truth, buffer_m=3.0)
-    assert scores.correctness > 0.9 and scores.completeness > 0.5
+    # the default (evidence) cue: measured completeness 0.875, correctness 0.897 (the
+    # paper's cue alone: half the roads, at a correctness over 0.9)
+    assert scores.completeness > 0.8 and scores.correctness > 0.85
 
 
 @pytest.mark.parametrize("side_m, points", [(20.0, None), (100.0, 500)])

@@ -68,7 +68,7 @@ def test_workers_start_with_this_installation_when_sys_executable_is_another(mon
 
 
 def test_two_workers_give_the_network_of_one(tiled_cloud, tiled_network):
-    parallel = extract_roads(tiled_cloud, workers=2)
+    parallel = extract_roads(tiled_cloud, cue="intensity", workers=2)
     assert parallel.run == {"tiles": 6, "reused": 0}
     for name in ("centrelines", "polygons", "junctions"):
         assert_same_geometries(getattr(parallel.network, name),
@@ -78,7 +78,7 @@ def test_two_workers_give_the_network_of_one(tiled_cloud, tiled_network):
                                   tiled_network.network.centrelines.width_m)
     # the per-width likelihood maps come back only when asked for (a city's memory)
     assert sum(len(t.likelihood) for t in parallel.tiles) >= len(parallel.tiles)
-    lean = extract_roads(tiled_cloud, workers=2, tile_maps=False)
+    lean = extract_roads(tiled_cloud, cue="intensity", workers=2, tile_maps=False)
     assert [len(t.likelihood) for t in lean.tiles] == [0] * 6
     assert_same_geometries(lean.network.centrelines, tiled_network.network.centrelines)
     # ... and the driver keeps of each tile only its core: the same QA layers and mosaics
@@ -101,7 +101,7 @@ def test_cli_on_a_real_scheduler_and_worker_on_loopback(tiled_cloud, tiled_netwo
                                                          dask_loopback):
     out = tmp_path / "roads.gpkg"
     done = subprocess.run([*GISROADS, "lidar", str(tiled_cloud), "-o", str(out), "--json",
-                           "--scheduler", dask_loopback, "--work-dir", str(tmp_path / "work")],
+                           "--cue", "intensity", "--scheduler", dask_loopback, "--work-dir", str(tmp_path / "work")],
                           capture_output=True, text=True, env=ENV, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     result = json.loads(done.stdout)

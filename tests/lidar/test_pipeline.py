@@ -19,7 +19,7 @@ def scene_cloud(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def roads(scene_cloud):
-    return extract_roads(scene_cloud[1])
+    return extract_roads(scene_cloud[1], cue="intensity")
 
 
 def test_output_contract_in_the_cloud_crs(scene_cloud, roads):
@@ -47,7 +47,7 @@ def test_cloud_without_intensity_is_refused(tmp_path):
     with LasPointWriter(tmp_path / "noi.laz", crs=CRS("EPSG:32633")) as writer:
         writer.write(rng.uniform([0, 0, 0], [300, 300, 1], (20000, 3)))
     with pytest.raises(ValueError, match="intensity"):
-        extract_roads(tmp_path / "noi.laz")
+        extract_roads(tmp_path / "noi.laz", cue="intensity")
 
 
 def test_auto_cell_follows_the_point_spacing():

@@ -27,7 +27,7 @@ def _run(tmp_path_factory, name, **scene_args):
     scene = make_scene(seed=0, size_m=(300.0, 300.0), **scene_args)
     path = tmp_path_factory.mktemp(name) / "cloud.laz"
     write_cloud(scene, path, density_per_m2=DENSITY, seed=0)
-    return scene, extract_roads(path)
+    return scene, extract_roads(path, cue="intensity")
 
 
 @pytest.fixture(scope="module")

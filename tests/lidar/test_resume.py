@@ -15,7 +15,7 @@ def test_a_killed_run_resumes_without_redoing_finished_tiles(tiled_cloud, tiled_
                                                              tmp_path):
     work, out = tmp_path / "work", tmp_path / "roads.gpkg"
     command = [*GISROADS, "lidar", str(tiled_cloud), "-o", str(out), "--json", "--workers", "1",
-               "--work-dir", str(work)]
+               "--cue", "intensity", "--work-dir", str(work)]
     run = subprocess.Popen(command, env=ENV, stdout=subprocess.DEVNULL,
                            stderr=subprocess.DEVNULL, start_new_session=True)
     try:

@@ -88,7 +88,7 @@ def fusa_stages(path: Path) -> dict:
     hypotheses = road_hypotheses(level_image, magnitude, orientation, labels)
     maps = likelihood_maps(hypotheses, level_image, l_max=L_MAX)
     selected = greedy_min_cover(hypotheses, maps, l_max=L_MAX)
-    network = pipeline.extract_roads(path).network
+    network = pipeline.extract_roads(path, cue="intensity").network
     truth = read_layer(path.parent / "ground_truth" / "fusa" / "centrelines.geojson")
     scores = buffer_metrics(network.centrelines.to_crs(truth.crs), truth, buffer_m=3.0)
     return {

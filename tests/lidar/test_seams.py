@@ -14,7 +14,7 @@ def two_tiles(tmp_path_factory):
     scene = make_scene(seed=0, size_m=(500.0, 300.0), features=("buildings", "trees"))
     path = tmp_path_factory.mktemp("seam") / "cloud.laz"
     write_cloud(scene, path, density_per_m2=8.0, seed=0)
-    return scene, extract_roads(path, tile_m=300.0, overlap_m=100.0)
+    return scene, extract_roads(path, cue="intensity", tile_m=300.0, overlap_m=100.0)
 
 
 def test_the_run_has_two_tiles_and_scores_like_one(two_tiles):

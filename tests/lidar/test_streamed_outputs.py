@@ -41,7 +41,7 @@ def test_the_job_writes_tile_by_tile_what_the_api_assembles(tiled_cloud, tiled_n
         return result
     monkeypatch.setattr(pipeline, "kept_result", counted)
     out, rasters = tmp_path / "roads.gpkg", tmp_path / "rasters"
-    result = lidar_job(tiled_cloud, out, rasters_dir=rasters)
+    result = lidar_job(tiled_cloud, out, cue="intensity", rasters_dir=rasters)
     # the six tiles' results are read back one after another: at most the one being
     # written and the next one alive at a time
     assert result["tiles"] == 6 and 1 <= most[0] <= 2
@@ -67,8 +67,10 @@ def test_the_job_writes_tile_by_tile_what_the_api_assembles(tiled_cloud, tiled_n
 def test_two_workers_write_the_layers_of_one(tiled_cloud, tmp_path):
     pytest.importorskip("distributed")
     one, two = tmp_path / "one.gpkg", tmp_path / "two.gpkg"
-    lidar_job(tiled_cloud, one, workers=1, rasters_dir=tmp_path / "r1", tile_maps=False)
-    lidar_job(tiled_cloud, two, workers=2, rasters_dir=tmp_path / "r2", tile_maps=False)
+    lidar_job(tiled_cloud, one, cue="intensity", workers=1, rasters_dir=tmp_path / "r1",
+              tile_maps=False)
+    lidar_job(tiled_cloud, two, cue="intensity", workers=2, rasters_dir=tmp_path / "r2",
+              tile_maps=False)
     assert list_layers(one) == list_layers(two)
     for name in list_layers(one):
         _assert_same_layer(read_layer(two, name), read_layer(one, name))
@@ -82,7 +84,7 @@ def test_two_workers_write_the_layers_of_one(tiled_cloud, tmp_path):
 
 def test_the_lazy_network_holds_no_tile_and_removes_its_temporary_store(tiled_cloud,
                                                                         tiled_network):
-    with extract_roads(tiled_cloud, lazy=True) as roads:
+    with extract_roads(tiled_cloud, cue="intensity", lazy=True) as roads:
         assert isinstance(roads, TiledRoads)
         assert roads.network.qa == {} and len(roads.tiles) == len(roads.files) == 6
         assert_same_geometries(roads.network.centrelines, tiled_network.network.centrelines)
@@ -95,10 +97,11 @@ def test_the_lazy_network_holds_no_tile_and_removes_its_temporary_store(tiled_cl
 
 def test_a_cloud_without_tiles_writes_empty_qa_layers(tiled_cloud, tmp_path):
     """No tile holds enough points: the QA layers are there, empty, as the API gives."""
-    api = extract_roads(tiled_cloud, min_points=10**9)
+    api = extract_roads(tiled_cloud, cue="intensity", min_points=10**9)
     out = tmp_path / "roads.gpkg"
     with pytest.warns(Warning):
-        lidar_job(tiled_cloud, out, min_points=10**9, rasters_dir=tmp_path / "rasters")
+        lidar_job(tiled_cloud, out, cue="intensity", min_points=10**9,
+                  rasters_dir=tmp_path / "rasters")
     assert list_layers(out) == list(api.network.layers())
     for name in ("rectangles", "hypotheses"):
         assert len(read_layer(out, name)) == 0

@@ -52,7 +52,7 @@ def test_cancel_while_tiles_run_on_dask_workers_stops_them_and_writes_nothing(
     children_before = set(psutil.Process().children(recursive=True))
     with pytest.raises(QgsProcessingException, match="cancelled"):
         run_algorithm("lidarroadnetwork", {"INPUT": str(tmp_path / "cloud.laz"), "TILE": 150,
-                                           "OVERLAP": 50, "WORKERS": 2,
+                                           "OVERLAP": 50, "WORKERS": 2, "CUE": 0,
                                            "OUTPUT": str(tmp_path / "roads.gpkg")}, feedback)
     assert "9 tiles on 2 Dask workers" in texts
     assert not any(t.startswith("2 of ") and " tiles done" in t for t in texts)
@@ -94,7 +94,7 @@ def test_a_forest_plot_succeeds_with_empty_typed_layers_and_a_warning(run_algori
                                                                       lidar_dir, tmp_path):
     forest = lidar_dir / "Megaplot.laz"
     feedback = RecordedFeedback()
-    result = run_algorithm("lidarroadnetwork", {"INPUT": str(forest),
+    result = run_algorithm("lidarroadnetwork", {"INPUT": str(forest), "CUE": 0,  # intensity
                                                 "OUTPUT": str(tmp_path / "roads.gpkg")},
                            feedback)
     assert (result["ROADS"], result["LENGTH_M"], result["JUNCTIONS"]) == (0, 0, 0)

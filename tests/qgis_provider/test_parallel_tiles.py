@@ -8,7 +8,7 @@ def test_lidar_tiles_on_two_workers_started_from_qgis(qgis_process, scene_dir, t
     """Inside QGIS sys.executable is not the embedded interpreter (here the first python3
     on PATH, another installation of 3.11): the workers must start with the embedded
     installation's own, import the plugin's gisroads and give the network of one worker."""
-    common = [f"INPUT={scene_dir / 'cloud.laz'}", "LENGTHS=40,80,150", "TILE=150",
+    common = [f"INPUT={scene_dir / 'cloud.laz'}", "CUE=0", "LENGTHS=40,80,150", "TILE=150",
               "OVERLAP=50"]
     runs = {workers: qgis_process("run", "gisroads:lidarroadnetwork", "--", *common,
                                   f"WORKERS={workers}",

@@ -100,7 +100,7 @@ def test_geopackage_opens_with_every_layer_styled(qgis_process, scene_dir):
 
 
 def test_lidar_road_network_then_tag_road_points(qgis_process, scene_dir, tmp_path):
-    result = qgis_process.run("lidarroadnetwork", INPUT=scene_dir / "cloud.laz",
+    result = qgis_process.run("lidarroadnetwork", INPUT=scene_dir / "cloud.laz", CUE=0,
                               LENGTHS="40,80,150", OUTPUT=tmp_path / "roads.gpkg",
                               TAGGED_LAS=tmp_path / "tagged.laz", RASTERS=tmp_path / "rasters")
     assert result["ROADS"] > 0 and result["LENGTH_M"] > 100
