@@ -65,7 +65,7 @@ def _peak_rss_mb() -> float:
 def _stages(cloud: str, work: str, out: str, workers: int) -> dict:
     """The run's wall times: the reading pass, the tiles, the network, the writing."""
     from gisroads.jobs.lidar import lidar_job
-    from gisroads.lidar.tilestore import open_store
+    from gisroads.tiling.tilestore import open_store
 
     start = time.perf_counter()
     store = open_store(cloud, work, workers=workers)

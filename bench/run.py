@@ -210,7 +210,7 @@ def case_lidar_tile(out: Path, size_m: float, density: float) -> dict:
     from gisroads.io.las import concatenate
     from gisroads.lidar.baseline import baseline_roads
     from gisroads.lidar.pipeline import extract_tile
-    from gisroads.lidar.tiles import Tile
+    from gisroads.tiling.tiles import Tile
     from gisroads.synthetic import make_scene, render_cloud
 
     scene = make_scene(seed=0, size_m=(size_m, size_m))
@@ -1290,6 +1290,44 @@ def main() -> None:
     lines += ["\n" + figures["table"] for figures in results.values() if "table" in figures]
     (args.out / "results.md").write_text("\n".join(lines) + "\n")
     print(f"results in {args.out}/results.json and results.md; quick-looks *.png")
+    if not (args.quick or args.city):  # a whole run is the project's figures of record
+        write_results_page(DOCS_PAGE, "\n".join(lines), _run_stamp())
+        print(f"and in {DOCS_PAGE}")
+
+
+DOCS_PAGE = Path(__file__).resolve().parents[1] / "docs" / "benchmarks.md"
+RESULTS_BEGIN = "<!-- BEGIN make bench results: written by bench/run.py, do not edit -->"
+RESULTS_END = "<!-- END make bench results -->"
+
+
+def _run_stamp() -> str:
+    """When, on what and at which commit a run was made."""
+    import datetime
+    import os
+    import platform
+    import subprocess
+
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                            text=True, cwd=DOCS_PAGE.parent).stdout.strip() or "unknown"
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                           capture_output=True, text=True, cwd=DOCS_PAGE.parent).stdout.strip()
+    return (f"{datetime.date.today().isoformat()}, commit {commit}"
+            f"{' with local changes' if dirty else ''}, {platform.machine()}, "
+            f"{os.cpu_count()} cores")
+
+
+def write_results_page(page: Path, results_md: str, stamp: str) -> None:
+    """Put a whole run's tables (``results.md``) into ``page`` between its markers, written
+    to a temporary file and renamed; the hand-written rest of the page stays."""
+    text = page.read_text(encoding="utf-8")
+    if text.count(RESULTS_BEGIN) != 1 or text.count(RESULTS_END) != 1:
+        raise ValueError(f"{page}: expected one {RESULTS_BEGIN!r} and one {RESULTS_END!r}")
+    head, rest = text.split(RESULTS_BEGIN)
+    _, tail = rest.split(RESULTS_END)
+    block = f"{RESULTS_BEGIN}\n\nLast whole run: {stamp}.\n\n{results_md.strip()}\n\n{RESULTS_END}"
+    temporary = page.with_suffix(".md.tmp")
+    temporary.write_text(head + block + tail, encoding="utf-8")
+    temporary.replace(page)
 
 
 if __name__ == "__main__":

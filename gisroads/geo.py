@@ -27,6 +27,8 @@ from scipy.sparse.csgraph import connected_components
 CENTRELINES = "road_centrelines"
 POLYGONS = "road_polygons"
 JUNCTIONS = "junctions"
+#: Car-park aisles and other service ways kept apart from the roads (LiDAR evidence cue).
+SERVICE_CENTRELINES = "service_centrelines"
 
 #: Column names and dtypes of the three contract layers (geometry column excluded).
 CONTRACT_SCHEMA = {
@@ -36,6 +38,17 @@ CONTRACT_SCHEMA = {
     JUNCTIONS: {"junction_id": "int64", "degree": "int64"},
 }
 CONTRACT_GEOMETRY = {CENTRELINES: "LineString", POLYGONS: "Polygon", JUNCTIONS: "Point"}
+
+
+LOCAL_CRS = CRS.from_proj4("+proj=tmerc +lat_0=0 +lon_0=0 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 "
+                           "+units=m +no_defs")
+"""Metric CRS given to images without georeferencing (a stand-in, not their location)."""
+
+
+def local_transform(shape: tuple[int, int], pixel_m: float) -> Affine:
+    """Transform of an image without georeferencing in :data:`LOCAL_CRS`: the lower-left
+    corner at (0, 0), north up."""
+    return Affine(pixel_m, 0.0, 0.0, 0.0, -pixel_m, shape[0] * pixel_m)
 
 
 @dataclass(frozen=True)

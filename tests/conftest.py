@@ -25,6 +25,17 @@ def lidar_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
+def tiled_cloud(tmp_path_factory):
+    """A 700 x 500 m scene of every feature at 2 pulses/m2: six tiles of 300 m."""
+    from gisroads.synthetic import make_scene, write_cloud
+
+    scene = make_scene(seed=1, size_m=(700.0, 500.0))
+    path = tmp_path_factory.mktemp("tiled") / "cloud.laz"
+    write_cloud(scene, path, density_per_m2=2.0, seed=1)
+    return path
+
+
+@pytest.fixture(scope="session")
 def dask_loopback(tmp_path_factory):
     """The address of a real ``dask-scheduler`` and one single-threaded ``dask-worker``
     started here on loopback, shared by the tests that run a job on a scheduler."""

@@ -1,5 +1,6 @@
 """The house rules of ``gisroads/``, read from the source with ``ast`` (nothing imported):
-the core never imports QGIS, and no module imports from a floor above its own.
+the core never imports QGIS, no module imports from a floor above its own, and no method
+imports another.
 
 Floors, bottom up (a package may import from its own floor and those below):
 
@@ -7,11 +8,12 @@ Floors, bottom up (a package may import from its own floor and those below):
    and the package's ``__init__``;
 1. reading and writing, running tasks: ``io``, ``parallel``;
 2. the shared stages: ``features``, ``segmentation``, ``vectorize``, ``network``,
-   ``synthetic``;
+   ``synthetic``, ``tiling``;
 3. scoring: ``evaluate``;
-4. the methods and what uses them: ``lidar``, ``imagery``, ``snakes``, ``learn``,
-   ``update``;
-5. the whole jobs and the command line: ``jobs``, ``cli``.
+4. the learned models: ``learn``;
+5. the methods: ``lidar``, ``imagery``, ``snakes``, ``update``. They are siblings: none
+   imports another (what two of them share lives on a floor below);
+6. the whole jobs and the command line: ``jobs``, ``cli``.
 
 In ``cli``, the subcommand modules are siblings: each imports the shared ``options`` and
 ``report`` but no other subcommand.
@@ -29,11 +31,13 @@ PACKAGE = Path(__file__).resolve().parents[1] / "gisroads"
 FLOORS = [
     {"__init__", "geo", "progress", "errors", "resources", "optimize"},
     {"io", "parallel"},
-    {"features", "segmentation", "vectorize", "network", "synthetic"},
+    {"features", "segmentation", "vectorize", "network", "synthetic", "tiling"},
     {"evaluate"},
-    {"lidar", "imagery", "snakes", "learn", "update"},
+    {"learn"},
+    {"lidar", "imagery", "snakes", "update"},
     {"jobs", "cli"},
 ]
+METHODS = FLOORS[5]
 FLOOR = {name: level for level, names in enumerate(FLOORS) for name in names}
 
 
@@ -99,6 +103,20 @@ def test_no_import_goes_up_a_floor():
                               f"{own[0]} (floor {own[1]}) imports {module} "
                               f"(floor {target[1]})")
     assert upward == []
+
+
+def test_no_method_imports_another():
+    found = []
+    for path, name, package in _modules():
+        own = _floor_of(name)[0]
+        if own not in METHODS:
+            continue
+        for line, module in _imports(path, package):
+            target = _floor_of(module)
+            if target is not None and target[0] in METHODS and target[0] != own:
+                found.append(f"{path.relative_to(PACKAGE.parent)}:{line}: {own} imports "
+                             f"{module}")
+    assert found == []
 
 
 def test_no_cli_subcommand_imports_another():

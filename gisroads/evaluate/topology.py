@@ -16,7 +16,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ..geo import LineGraph, line_graph
+from ..geo import line_graph
 from .buffer import align_to_reference, metric_lines, typed_parts
 
 

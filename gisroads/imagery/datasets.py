@@ -49,26 +49,20 @@ import rasterio
 import shapely
 from affine import Affine
 from pyproj import CRS, Transformer
-from rasterio import features
 from rasterio.errors import NotGeoreferencedWarning
 from rasterio.enums import Resampling
 from rasterio.warp import reproject
 from scipy import ndimage
-from shapely.geometry import shape as as_shape
 
 from ..errors import GisroadsError, MissingFileError
-from ..evaluate.buffer import clip_lines
-from ..geo import GeoRaster
+from ..geo import LOCAL_CRS, GeoRaster, local_transform
 from ..io.raster import read_raster
 from ..io.vector import read_layer
+from ..vectorize.regions import segment_polygons
 from ..vectorize.skeleton import skeleton_lines
 
 DATA_DIR = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "imagery"
 """``../shared/data/imagery`` beside the repository."""
-
-LOCAL_CRS = CRS.from_proj4("+proj=tmerc +lat_0=0 +lon_0=0 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 "
-                           "+units=m +no_defs")
-"""Metric CRS given to images without georeferencing (a stand-in, not their location)."""
 
 DATASETS = ("spacenet_vegas", "spacenet_paris", "massachusetts", "deepglobe", "eth")
 
@@ -182,19 +176,6 @@ def _clip_frame(lines: gpd.GeoDataFrame, area) -> gpd.GeoDataFrame:
     parts = clipped.explode(index_parts=False).reset_index(drop=True)
     keep = (parts.geom_type == "LineString") & ~parts.geometry.is_empty
     return parts[keep.to_numpy()].reset_index(drop=True)
-
-
-def local_transform(shape: tuple[int, int], pixel_m: float) -> Affine:
-    """Transform of an image without georeferencing in :data:`LOCAL_CRS`: the lower-left
-    corner at (0, 0), north up."""
-    return Affine(pixel_m, 0.0, 0.0, 0.0, -pixel_m, shape[0] * pixel_m)
-
-
-def mask_polygon(mask: np.ndarray, transform: Affine) -> shapely.Geometry:
-    """The True pixels of a mask as one (Multi)Polygon in map coordinates."""
-    shapes = [as_shape(geom) for geom, _ in features.shapes(
-        np.asarray(mask, np.uint8), mask=np.asarray(mask, bool), transform=transform)]
-    return shapely.union_all(shapes) if shapes else shapely.Polygon()
 
 
 def prune_spurs(lines: gpd.GeoDataFrame, spur_m: float) -> gpd.GeoDataFrame:
@@ -359,8 +340,10 @@ def _plain_image(path, pixel_m: float) -> GeoRaster:
 
 def _mask_record(name, dataset, image, road, valid, *, pixel_m, buffer_m):
     mask = GeoRaster(road & valid, image.transform, image.crs)
-    area = (shapely.box(*image.bounds) if valid.all()
-            else mask_polygon(valid, image.transform))
+    area = shapely.box(*image.bounds)
+    if not valid.all():
+        area = segment_polygons(np.where(valid, 0, -1).astype(np.int32), 1, image.transform)[0]
+        area = shapely.Polygon() if area is None else area
     truth = _clip_frame(mask_centrelines(mask), area)
     return BenchmarkImage(f"{dataset}/{name}", image, truth, area, buffer_m, pixel_m,
                           SOURCES[dataset], truth_mask=mask,

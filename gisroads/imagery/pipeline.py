@@ -28,7 +28,7 @@ whole run, whatever the environment says: oversubscribed pools made the segmenta
 collapse on a loaded machine.
 
 An image of more than ``2 * TILE_PX`` pixels a side runs the papers' stages tile by tile
-(:func:`image_tiles`: the LiDAR tiles of :mod:`gisroads.lidar.tiles`, overlapping by
+(:func:`image_tiles`: the tiles of :mod:`gisroads.tiling.tiles`, overlapping by
 :data:`TILE_OVERLAP_M`), the tiles' road strings stitched at the seams as the LiDAR tiles'
 centre lines are, then one network stage (junctions, significance) over the whole image.
 """
@@ -46,7 +46,7 @@ import shapely
 
 from ..errors import GisroadsError
 from ..geo import GeoRaster, RoadNetwork
-from ..lidar.tiles import Tile, clip_to_core, stitch_tiles, tile_grid
+from ..tiling.tiles import Tile, clip_to_core, stitch_tiles, tile_grid
 from ..progress import Progress, report, scaled
 from .cues import context_rasters, image_cues, valid_mask
 from .datasets import crop_raster
@@ -94,7 +94,7 @@ TILE_PX = 1000
 ``2 * TILE_PX`` rows or columns runs tile by tile (:func:`image_tiles`), so the stages'
 memory (a few float rasters per tile and the segmentation's arrays) stays that of a tile."""
 TILE_OVERLAP_M = 100.0
-"""Overlap of neighbouring tiles, metres (the LiDAR paper's, :mod:`gisroads.lidar.tiles`):
+"""Overlap of neighbouring tiles, metres (the LiDAR paper's, :mod:`gisroads.tiling.tiles`):
 each core sees 50 m of context on every side, more than the longest gap edge
 (:data:`gisroads.network.subgraph.MAX_GAP_M`, 40 m); at most a third of a tile."""
 
@@ -477,7 +477,7 @@ def _road_strings(image: GeoRaster, probability: GeoRaster | None, *, nir_band, 
 
 def image_tiles(image: GeoRaster, tile_px: int = TILE_PX) -> list[tuple[Tile, tuple]]:
     """The tiles the papers' stages run in on a large image: the LiDAR tiles
-    (:func:`gisroads.lidar.tiles.tile_grid`) of ``tile_px`` pixels overlapping by
+    (:func:`gisroads.tiling.tiles.tile_grid`) of ``tile_px`` pixels overlapping by
     :data:`TILE_OVERLAP_M` (in whole pixels, at most a third of a tile), each with its pixel
     window
     ``(rows, cols)`` (slices, cut to the image); tiles without a valid pixel are left out.
@@ -510,7 +510,7 @@ def image_tiles(image: GeoRaster, tile_px: int = TILE_PX) -> list[tuple[Tile, tu
 
 def _cut_to_core(frame: gpd.GeoDataFrame, tile: Tile) -> gpd.GeoDataFrame:
     """A tile's QA layer cut to the tile's core: lines as the stitched strings are
-    (:func:`gisroads.lidar.tiles.clip_to_core`), polygons to their polygonal parts inside
+    (:func:`gisroads.tiling.tiles.clip_to_core`), polygons to their polygonal parts inside
     (a segment along the core's border leaves no line or point behind)."""
     if len(frame) == 0 or not frame.geom_type.isin(["Polygon", "MultiPolygon"]).all():
         return clip_to_core(frame, tile)
@@ -529,7 +529,7 @@ def _cut_to_core(frame: gpd.GeoDataFrame, tile: Tile) -> gpd.GeoDataFrame:
 def _tiled_road_strings(image: GeoRaster, probability: GeoRaster | None, *, tile_px: int,
                         timings: dict, progress: Progress, **stages):
     """:func:`_road_strings` tile by tile (:func:`image_tiles`), the tiles' road strings
-    stitched as the LiDAR tiles' centre lines are (:func:`gisroads.lidar.tiles.stitch_tiles`:
+    stitched as the LiDAR tiles' centre lines are (:func:`gisroads.tiling.tiles.stitch_tiles`:
     clipped to the cores, seam ends joined, pieces of one road merged), the QA layers cut
     to the cores with a ``tile`` column (ids are per tile)."""
     tiles = image_tiles(image, tile_px)

@@ -23,6 +23,13 @@ from .vector import atomic_path
 DEFAULT_CHUNK = 2_000_000
 """Points per chunk when streaming (about 100 MB of working arrays)."""
 
+#: ASPRS point classes (LAS 1.4, table 17) that gisroads reads or writes: ground, road
+#: surface (what the road tagging writes), bridge deck; low vegetation, building and water,
+#: which are never the road level; low and high noise.
+GROUND_CLASS, ROAD_SURFACE_CLASS, BRIDGE_DECK_CLASS = 2, 11, 17
+NOT_ROAD_CLASSES = (3, 6, 9)
+NOISE_CLASSES = (7, 18)
+
 #: GeoTIFF VerticalUnitsGeoKey codes (EPSG unit codes) seen in LAS files.
 _GEOTIFF_VERTICAL_UNITS = {9001: ("metre", 1.0), 9002: ("foot", 0.3048),
                            9003: ("US survey foot", 0.3048006096012192)}

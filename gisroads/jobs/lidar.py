@@ -12,8 +12,8 @@ from pyproj import Transformer
 
 from ..errors import GisroadsError, NoRoadFoundWarning
 from ..features.edges import local_energy
-from ..geo import POLYGONS, GeoRaster
-from ..io.las import cloud_crs, iter_las_chunks, read_las
+from ..geo import POLYGONS, SERVICE_CENTRELINES, GeoRaster
+from ..io.las import GROUND_CLASS, cloud_crs, iter_las_chunks, read_las
 from ..io.quicklook import write_quicklook
 from ..io.raster import read_raster, write_geotiff
 from ..io.vector import GeoPackageWriter, list_layers, read_layer, write_geopackage
@@ -29,7 +29,7 @@ from ..lidar.pipeline import (EVIDENCE_THRESHOLD, TiledRoads, auto_cell_m,
                               edges_and_segments, evidence_raster, extract_roads,
                               ground_and_intensity)
 from ..lidar.tagging import ground_level_heights, tag_road_points
-from ..lidar.tilestore import inputs_crs, las_inputs
+from ..tiling.tilestore import inputs_crs, las_inputs
 from ..progress import Progress, report, scaled
 from .common import _layer, _warn_if_empty, _warn_if_no_road, network_summary, stage_default
 
@@ -94,6 +94,9 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
                   "tiles_reused": roads.run.get("reused", 0)}
         if roads.cues:
             result["cues"] = ",".join(roads.cues)
+        if SERVICE_CENTRELINES in network.qa:
+            result["service_ways"] = len(network.qa[SERVICE_CENTRELINES])
+            result["service_length_m"] = float(network.qa[SERVICE_CENTRELINES].length.sum())
         if rasters is not None:
             if roads.evidence is not None:
                 write_geotiff(rasters / "road_evidence.tif", roads.evidence,
@@ -120,9 +123,12 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
             # the QA layer of the cue: the selected rectangles, or the bridged gaps
             qa = (read_layer(out_path, "rectangles") if roads.cue == "intensity"
                   else network.qa["gap_edges"].query("selected"))
+            service = network.qa.get(SERVICE_CENTRELINES)
             write_quicklook(quicklook, [
                 (qa.to_crs(working), dict(facecolor="none", edgecolor="cyan", linewidth=0.6)
                  if roads.cue == "intensity" else dict(color="cyan", linewidth=2)),
+                *([] if service is None else [(service.to_crs(working), dict(
+                    color="#fdae61", linewidth=1.5, linestyle="--", label="service ways"))]),
                 (network.centrelines.to_crs(working),
                  dict(color="red", linewidth=1.5, label="road centre lines")),
                 (network.junctions.to_crs(working),
@@ -414,7 +420,7 @@ def _ground_points_xy(cloud_path, crs, spacing_m: float):
         if chunk.crs is not None and crs is not None and chunk.crs != crs:
             xy = np.column_stack(Transformer.from_crs(chunk.crs, crs, always_xy=True)
                                  .transform(xy[:, 0], xy[:, 1]))
-        ground.append(thin_points(xy[chunk.classification == 2], spacing_m / 2))
+        ground.append(thin_points(xy[chunk.classification == GROUND_CLASS], spacing_m / 2))
         every.append(thin_points(xy, spacing_m / 2))
     ground = np.concatenate(ground)
     return ground if len(ground) else np.concatenate(every)

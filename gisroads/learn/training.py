@@ -26,7 +26,7 @@ from rasterio import features as rio_features
 from scipy import ndimage
 
 from ..errors import GisroadsError, MissingFileError
-from ..geo import GeoRaster
+from ..geo import LOCAL_CRS, GeoRaster, local_transform
 from ..progress import Progress, report, scaled
 from . import features as ft
 from .model import (RoadModel, WorkGrid, blend_models, fit_model, image_probability, sigmoid,
@@ -108,8 +108,6 @@ def augment(rgb: np.ndarray, road: np.ndarray, source_pixel_m: float, pixel_m: f
     road : ndarray of bool
         The road mask on the same grid.
     """
-    from ..imagery.datasets import LOCAL_CRS, local_transform
-
     zoom = source_pixel_m / pixel_m
     bands = np.stack([_rescale(b, zoom, 1) for b in np.asarray(rgb, np.float32) / 255.0])
     mask = _rescale(np.asarray(road, np.float32), zoom, 1) > 0.5

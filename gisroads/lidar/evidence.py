@@ -116,7 +116,9 @@ data: NaN.
 lines its aisles does: :func:`vehicle_cells` marks the objects of a vehicle's height,
 :func:`vehicle_flank_share` measures how much of a network road's flanks they cover and
 :func:`without_car_park_aisles` sets the likelihood of the lined roads to 0 for a second
-run of the network stage (beyond the paper, like this whole module).
+run of the network stage (beyond the paper, like this whole module); the pipeline keeps
+the aisles as service ways in their own layer
+(:func:`gisroads.lidar.pipeline.service_lines`).
 
 **Shores.** Once the ponds are out, the open ground left between a pond and the forest is a
 strip as wide as a street, flat, open to the sky, and skeletonised into a road. What lines
@@ -164,13 +166,10 @@ from scipy import ndimage
 
 from ..errors import GisroadsError
 from ..geo import GeoRaster
-from ..io.las import PointCloud
+from ..io.las import (BRIDGE_DECK_CLASS, GROUND_CLASS, NOISE_CLASSES, NOT_ROAD_CLASSES,
+                      ROAD_SURFACE_CLASS, PointCloud)
 from .intensity import auto_cell_m, image_grid, split_share
 
-#: ASPRS classes: ground, road surface, bridge deck; those that are not the road level; noise
-GROUND, ROAD_SURFACE, BRIDGE_DECK = 2, 11, 17
-NOT_ROAD_CLASSES = (3, 6, 9)
-NOISE_CLASSES = (7, 18)
 FILL_SIGMA_M = 16.0
 """Widest Gaussian (sigma, metres) that fills the terrain under buildings; beyond it the
 nearest ground."""
@@ -501,7 +500,7 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
         raise GisroadsError("the cloud holds no points")
     x, y, z = xyz.T
     classes = np.asarray(cloud.classification)
-    classified = use_classification and bool((classes == GROUND).any())
+    classified = use_classification and bool((classes == GROUND_CLASS).any())
     if bounds is None:
         bounds = (x.min(), y.min(), x.max(), y.max())
     if cell_m is None:
@@ -525,9 +524,9 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
 
     # Terrain and the returns of the lowest surface.
     if classified:
-        deck = inside & (classes == BRIDGE_DECK)
+        deck = inside & (classes == BRIDGE_DECK_CLASS)
         deck_cell = grid(None, deck).ravel() > 0
-        ground = inside & np.isin(classes, (GROUND, ROAD_SURFACE)) & ~deck_cell[cell]
+        ground = inside & np.isin(classes, (GROUND_CLASS, ROAD_SURFACE_CLASS)) & ~deck_cell[cell]
         ground |= deck
         terrain = _fill_terrain(_cell_min(cell[ground], z[ground], size).reshape(rows, cols),
                                 FILL_SIGMA_M / cell_m)
@@ -671,7 +670,7 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
                              sigma_local), n_low)
         member = 1.0 - bad
         note = "ground classes 2, 11, 17; low classes 3, 6, 9 are not road"
-        road_points = low_points & (classes == ROAD_SURFACE)
+        road_points = low_points & (classes == ROAD_SURFACE_CLASS)
         if road_points.any():
             road_share = _ratio(_smooth(grid(None, road_points), sigma_local), n_low)
             member = member * (0.3 + 0.7 * road_share)
@@ -776,9 +775,9 @@ def flank_share(centrelines, cells: GeoRaster, *, gap_m: float = 0.5,
 
     A flank is the band from ``width / 2 + gap_m`` to ``width / 2 + gap_m + depth_m`` on
     either side of the centre line, sampled every cell along offset lines; samples outside
-    the raster or on cells without a return are left out. A car-park aisle is lined by rows of parked cars about 5 m
-    deep; a road by kerbs, verges, footpaths and buildings (cars parked along its kerb
-    stand inside its width).
+    the raster or on cells without a return are left out. A car-park aisle is lined by rows
+    of parked cars about 5 m deep; a road by kerbs, verges, footpaths and buildings (cars
+    parked along its kerb stand inside its width).
 
     Parameters
     ----------

@@ -18,7 +18,6 @@ them) out, and the network stage again.
 """
 from __future__ import annotations
 
-import hashlib
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from functools import lru_cache, partial
@@ -34,13 +33,16 @@ import shapely
 
 from ..errors import GisroadsError
 from ..features.edges import local_energy
-from ..geo import GeoRaster, RoadNetwork
+from ..geo import SERVICE_CENTRELINES, GeoRaster, RoadNetwork
 from ..io.las import PointCloud
 from ..io.raster import geotiff_writer
 from ..parallel import NOT_KEPT, for_each_result, keep_result, kept_result, shared_workers
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.rasters import raster_to_network
+from ..tiling.tiles import Tile, stitch_tiles
+from ..tiling.tilestore import (TileStore, code_fingerprint, digest, inputs_crs,
+                                las_inputs, open_store)
 from .evidence import (CAR_PARK_FLANK_SHARE, SHORE_FLANK_SHARE, dropout_cells, road_evidence,
                        vehicle_cells, without_flanked_roads)
 from .ground import GroundPlanes, ground_planes
@@ -50,8 +52,6 @@ from .intensity import IntensityImages, auto_cell_m, image_grid, intensity_image
 from .mincover import greedy_min_cover
 from .roads import lines_to_network, rectangle_lines
 from .tagging import level_heights
-from .tiles import Tile, stitch_tiles
-from .tilestore import TileStore, digest, inputs_crs, las_inputs, open_store
 
 METHOD = "zhu-mordohai"
 EVIDENCE_METHOD = "lidar-evidence"
@@ -292,26 +292,18 @@ def _for_driver(result):
 
 
 #: The sources a tile's result depends on (relative to the package).
-_TILE_SOURCES = ("lidar/*.py", "features/*.py", "segmentation/ncut.py", "vectorize/*.py",
-                 "optimize*", "evaluate/topology.py", "geo.py", "io/las.py")
+_TILE_SOURCES = ("lidar/*.py", "tiling/*.py", "features/*.py", "segmentation/ncut.py",
+                 "vectorize/*.py", "optimize*", "evaluate/topology.py", "geo.py", "io/las.py")
 
 
 @lru_cache(maxsize=1)
 def _code_fingerprint() -> str:
-    """Hash of the sources a tile runs and of the libraries' versions: finished tiles of
-    another version of the code are not reused."""
+    """:func:`gisroads.tiling.tilestore.code_fingerprint` of the sources a tile runs and
+    the libraries it calls."""
     import geopandas
     import scipy
     import skimage
-    sha = hashlib.sha1()
-    root = Path(__file__).resolve().parents[1]
-    sources = {p for pattern in _TILE_SOURCES for p in root.glob(pattern) if p.is_file()}
-    for source in sorted(sources):
-        sha.update(str(source.relative_to(root)).encode())
-        sha.update(source.read_bytes())
-    for module in (np, scipy, skimage, shapely, pd, geopandas):
-        sha.update(f"{module.__name__} {module.__version__}".encode())
-    return sha.hexdigest()[:16]
+    return code_fingerprint(_TILE_SOURCES, (np, scipy, skimage, shapely, pd, geopandas))
 
 
 def _results_folder(store: TileStore, work_dir, cue: str, options: dict) -> Path:
@@ -453,6 +445,9 @@ def _evidence_roads(path, *, threshold: float, network_options: dict | None,
             network = raster_to_network(likelihood, threshold=threshold,
                                         method=EVIDENCE_METHOD,
                                         progress=scaled(progress, 0.8, 1.0), **options)
+        network.qa[SERVICE_CENTRELINES] = service_lines(taken.query("reason == 'car-park aisle'"))
+    network.qa.setdefault(SERVICE_CENTRELINES, service_lines(network.centrelines.iloc[:0]))
+    network.centrelines["kind"] = "road"
     network.centrelines["cues"] = ",".join(used)
     network.polygons["level"] = np.zeros(len(network.polygons), np.int64)
     if source is not None and working is not None and source != working:
@@ -460,6 +455,36 @@ def _evidence_roads(path, *, threshold: float, network_options: dict | None,
             network.centrelines, network.polygons, network.junctions)),
             {name: frame.to_crs(source) for name, frame in network.qa.items()})
     return LidarRoads(network, None, evidence=likelihood, cues=used, run=run)
+
+
+def service_lines(lines: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
+    """Service ways (car-park aisles, taken out of the road network by
+    :func:`gisroads.lidar.evidence.without_flanked_roads`) as their own layer.
+
+    Parameters
+    ----------
+    lines : GeoDataFrame
+        LineStrings with ``width_m`` and, when taken for a reason, ``reason`` and
+        ``flank_share``.
+
+    Returns
+    -------
+    GeoDataFrame
+        ``service_id``, ``kind`` ("service"), ``reason``, ``width_m``, ``length_m`` and
+        ``flank_share`` (the share of the flanks that marked it), in the lines' CRS.
+    """
+    frame = lines.reset_index(drop=True)
+    count = len(frame)
+    return gpd.GeoDataFrame({
+        "service_id": np.arange(1, count + 1, dtype=np.int64),
+        "kind": np.full(count, "service", dtype=object),
+        "reason": (frame["reason"].to_numpy(object) if "reason" in frame
+                   else np.full(count, "", dtype=object)),
+        "width_m": frame["width_m"].to_numpy(np.float64),
+        "length_m": frame.geometry.length.to_numpy(np.float64),
+        "flank_share": (frame["flank_share"].to_numpy(np.float64) if "flank_share" in frame
+                        else np.zeros(count)),
+    }, geometry=frame.geometry.values, crs=lines.crs)
 
 
 def extract_roads(path, *, cue: str = "evidence", tile_m: float = 300.0,
@@ -473,7 +498,7 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = 300.0,
     """The road network of a point cloud, tile by tile.
 
     The input is read once: its points are bucketed into the tile grid on disk
-    (:mod:`gisroads.lidar.tilestore`), then every tile reads only its own points.
+    (:mod:`gisroads.tiling.tilestore`), then every tile reads only its own points.
 
     Parameters
     ----------
@@ -523,7 +548,9 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = 300.0,
     -------
     LidarRoads
         The network in the cloud's CRS; QA layers ``rectangles`` and ``hypotheses``
-        (intensity), ``gap_edges``, ``junction_connections`` and ``rejected`` (evidence).
+        (intensity), ``gap_edges``, ``junction_connections`` and ``rejected`` (evidence),
+        and with the evidence cue the car-park aisles in ``service_centrelines``
+        (:func:`service_lines`; the roads' ``kind`` is "road").
         ``run`` counts the tiles and those taken from ``work_dir``. A :class:`TiledRoads`
         when ``lazy``.
 
@@ -555,7 +582,7 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = 300.0,
     >>> scores.completeness > 0.8, scores.correctness > 0.8
     (True, True)
     >>> sorted(evidence.network.qa)
-    ['gap_edges', 'junction_connections', 'rejected']
+    ['gap_edges', 'junction_connections', 'rejected', 'service_centrelines']
     >>> buffer_metrics(evidence.network.centrelines, scene.truth.centrelines).completeness > 0.9
     True
     """

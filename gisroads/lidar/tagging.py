@@ -15,13 +15,9 @@ from affine import Affine
 from scipy import ndimage
 
 from ..geo import GeoRaster
-from ..io.las import PointCloud, write_classified
+from ..io.las import ROAD_SURFACE_CLASS, PointCloud, write_classified
 from .ground import ground_planes
 from .intensity import auto_cell_m, image_grid
-
-ROAD_SURFACE_CLASS = 11
-"""ASPRS class 11: road surface."""
-
 
 def level_heights(xyz: np.ndarray, level: np.ndarray, n_levels: int, *, transform: Affine,
                   shape: tuple[int, int], crs=None, fill_cells: int = 4) -> GeoRaster:

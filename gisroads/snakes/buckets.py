@@ -36,13 +36,13 @@ def iter_source(source, *, chunk_size: int = DEFAULT_CHUNK) -> Iterator[tuple[in
 def iter_indexed(source, *, chunk_size: int = DEFAULT_CHUNK, near=None
                  ) -> Iterator[tuple[np.ndarray, PointCloud]]:
     """``(position of each point in the source, chunk)`` of a PointCloud, a LAS/LAZ path or
-    a :class:`gisroads.lidar.tilestore.TileStore` (the LiDAR pipeline's points bucketed by
+    a :class:`gisroads.tiling.tilestore.TileStore` (the LiDAR pipeline's points bucketed by
     tile on disk: one stored cell at a time).
 
     ``near=(xy, reach_m)`` lets a tile store read only its cells within ``reach_m`` of the
     positions ``xy``; a file or a cloud is read whole (callers filter the points anyway).
     """
-    from ..lidar.tilestore import TileStore
+    from ..tiling.tilestore import TileStore
 
     if isinstance(source, TileStore):
         yield from source.iter_cells(None if near is None else source.cells_near(*near))
@@ -54,7 +54,7 @@ def iter_indexed(source, *, chunk_size: int = DEFAULT_CHUNK, near=None
 def source_size(source) -> int:
     """Points of a PointCloud, a LAS/LAZ path or a tile store (1 when unknown)."""
     from ..io.las import las_info
-    from ..lidar.tilestore import TileStore
+    from ..tiling.tilestore import TileStore
 
     if isinstance(source, PointCloud):
         return max(len(source), 1)

@@ -25,9 +25,8 @@ from scipy import ndimage
 
 from ..errors import GisroadsError
 from ..geo import GeoRaster, RoadNetwork
-from ..io.las import cloud_crs, write_classified
-from ..lidar.tagging import ROAD_SURFACE_CLASS
-from ..lidar.tilestore import digest
+from ..io.las import ROAD_SURFACE_CLASS, cloud_crs, write_classified
+from ..tiling.tilestore import code_fingerprint, digest
 from ..parallel import NOT_KEPT, keep_result, kept_result, run_tasks, shared_workers
 from ..progress import Progress, report, scaled
 from ..vectorize.ribbons import ribbon_areas, ribbons_to_network
@@ -384,7 +383,7 @@ def map_patches(cloud_path, map_lines: gpd.GeoDataFrame, *, snap_m: float | None
         Those with enough points and samples for a ribbon.
     crs : pyproj.CRS or None
     """
-    from ..lidar.tilestore import open_store
+    from ..tiling.tilestore import open_store
     from .subclouds import road_patches
 
     lines, working = _map_in_cloud_crs(cloud_path, map_lines)
@@ -500,21 +499,12 @@ def fit_patch(job: _PatchJob, road):
 
 
 def _code_fingerprint() -> str:
-    """Hash of the snakes' sources and the libraries' versions: finished patches of another
-    version of the code are not reused."""
-    import hashlib
-    from pathlib import Path
-
+    """:func:`gisroads.tiling.tilestore.code_fingerprint` of the snakes' sources and what
+    they read the points with."""
     import scipy
 
-    sha = hashlib.sha1()
-    root = Path(__file__).resolve().parents[1]
-    for source in sorted(root.glob("snakes/*.py")) + [root / "io" / "las.py",
-                                                       root / "lidar" / "tilestore.py"]:
-        sha.update(source.read_bytes())
-    for module in (np, scipy, shapely):
-        sha.update(f"{module.__name__} {module.__version__}".encode())
-    return sha.hexdigest()[:16]
+    return code_fingerprint(("snakes/*.py", "io/las.py", "tiling/tilestore.py"),
+                            (np, scipy, shapely))
 
 
 def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector: str = "exp",
@@ -525,7 +515,7 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
     """Roads of a LAS/LAZ file along an approximate road map (Boyko & Funkhouser, 2011).
 
     The file is decoded once into a tile store of :data:`PATCH_CELL_M` cells
-    (:mod:`gisroads.lidar.tilestore`); the map is registered on the points along it; then
+    (:mod:`gisroads.tiling.tilestore`); the map is registered on the points along it; then
     every road patch is a task (:func:`fit_patch`, :func:`gisroads.parallel.run_tasks`)
     that reads its subcloud from the store and fits its ribbon, here or on Dask: the same
     ribbons whatever the number of workers.
@@ -588,7 +578,7 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
     """
     from pathlib import Path
 
-    from ..lidar.tilestore import open_store
+    from ..tiling.tilestore import open_store
 
     lines, working = _map_in_cloud_crs(cloud_path, map_lines)
     with shared_workers():  # one cluster for the reading pass and the patches

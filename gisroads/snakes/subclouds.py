@@ -125,7 +125,7 @@ def road_patches(registered: RegisteredMap, source, *, plane_radius_m: float = 4
         From :func:`gisroads.snakes.registration.register_map`, in the source's CRS.
     source : PointCloud, path or TileStore
         The cloud, a LAS/LAZ file read through :func:`gisroads.io.las.iter_las_chunks`, or
-        the tile store of the LiDAR pipeline (:func:`gisroads.lidar.tilestore.open_store`),
+        the tile store of the LiDAR pipeline (:func:`gisroads.tiling.tilestore.open_store`),
         of which only the cells along the map are read.
     plane_radius_m : float
         Radius of the support plane's points (paper: 4 m).

@@ -27,7 +27,7 @@ import shapely
 from affine import Affine
 
 from ..errors import GisroadsError
-from ..io.las import LasPointWriter, PointCloud
+from ..io.las import BRIDGE_DECK_CLASS, GROUND_CLASS, LasPointWriter, PointCloud
 from ..progress import Progress, report
 from .network import (Kind, Material, Scene, SurfaceSample, describe_surfaces,
                       rasterize_surfaces)
@@ -50,7 +50,8 @@ REFLECTANCE = {
 _LOW = np.array([REFLECTANCE[m][0] for m in Material])
 _SPAN = np.array([REFLECTANCE[m][1] - REFLECTANCE[m][0] for m in Material])
 
-LAS_CLASS = {Kind.GROUND: 2, Kind.BUILDING: 6, Kind.CAR: 1, Kind.TREE: 5, Kind.DECK: 17}
+LAS_CLASS = {Kind.GROUND: GROUND_CLASS, Kind.BUILDING: 6, Kind.CAR: 1, Kind.TREE: 5,
+             Kind.DECK: BRIDGE_DECK_CLASS}
 _CLASS = np.array([LAS_CLASS[k] for k in Kind], dtype=np.uint8)
 
 

@@ -3,7 +3,7 @@ from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterFileDes
                        QgsProcessingParameterFolderDestination, QgsProcessingParameterNumber,
                        QgsProcessingParameterString)
 
-from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
+from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS, SERVICE_CENTRELINES
 from gisroads.jobs import lidar_job, parse_metres, stage_default
 from gisroads.lidar.pipeline import CUES, DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, EVIDENCE_THRESHOLD
 from gisroads.parallel import default_workers
@@ -22,9 +22,10 @@ class LidarRoadNetwork(GisroadsAlgorithm):
         "cue the cloud carries (ground intensity, height above the terrain, density, "
         "roughness, slope, returns, the file's classification, kerbs) goes through the "
         "network stage (Road raster to network): gaps are bridged, junctions built and "
-        "curved roads followed; car-park aisles and shores are left out. The QA layers are "
-        "gap_edges, junction_connections and rejected, and the raster folder receives "
-        "road_evidence.tif.</p>"
+        "curved roads followed; shores are left out, and car-park aisles (known by the "
+        "rows of cars along them) go to their own layer, service_centrelines. The QA "
+        "layers are gap_edges, junction_connections and rejected, and the raster folder "
+        "receives road_evidence.tif.</p>"
         "<p>The <i>intensity</i> cue follows Zhu &amp; Mordohai alone (the cloud needs "
         "intensity): ground planes on several levels (a road under a bridge and the bridge "
         "are both found), a 0.5 m intensity image per level, local-energy edges and a "
@@ -107,7 +108,7 @@ class LidarRoadNetwork(GisroadsAlgorithm):
                 n_segments=self.parameterAsInt(parameters, "SEGMENTS", context),
                 workers=self.parameterAsInt(parameters, "WORKERS", context) or default_workers())
         qa = (("hypotheses", "rectangles") if result["cue"] == "intensity"
-              else ("rejected", "gap_edges", "junction_connections"))
+              else ("rejected", "gap_edges", "junction_connections", SERVICE_CENTRELINES))
         load_geopackage_on_completion(context, out, (*qa, POLYGONS, CENTRELINES, JUNCTIONS),
                                       group="roads")
         return {"OUTPUT": out, "TAGGED_LAS": tagged, "RASTERS": rasters,

@@ -111,7 +111,7 @@ def test_lidar_writes_network_tagged_cloud_and_quicklook(tmp_path):
     assert summary["cue"] == "evidence" and "intensity" in summary["cues"].split(",")
     assert list_layers(tmp_path / "roads.gpkg") == [
         "road_centrelines", "road_polygons", "junctions", "junction_connections", "gap_edges",
-        "rejected"]
+        "rejected", "service_centrelines"]
     tagged = read_las(tmp_path / "tagged.laz")
     assert (tagged.classification == 11).sum() == summary["tagged_points"]
     assert (tmp_path / "roads.png").stat().st_size > 10_000
@@ -128,7 +128,7 @@ def test_lidar_on_a_cloud_without_roads_writes_empty_layers_and_warns(lidar_dir,
                                      "wrote empty layers")
     assert list_layers(tmp_path / "roads.gpkg") == [
         "road_centrelines", "road_polygons", "junctions", "junction_connections", "gap_edges",
-        "rejected"]
+        "rejected", "service_centrelines"]
     assert_empty_road_layers(tmp_path / "roads.gpkg")
     assert (tmp_path / "roads.png").stat().st_size > 10_000
     # a corrupt cloud is still an error that writes nothing

@@ -8,7 +8,8 @@ from rasterio.features import rasterize
 from scipy import ndimage
 
 from gisroads.geo import GeoRaster
-from gisroads.imagery.datasets import ETH_PIXEL_M, LOCAL_CRS
+from gisroads.geo import LOCAL_CRS
+from gisroads.imagery.datasets import ETH_PIXEL_M
 from gisroads.imagery.segments import segment_image
 from gisroads.io.raster import read_raster
 from gisroads.progress import Cancelled

@@ -10,7 +10,8 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 
 from gisroads.geo import GeoRaster
-from gisroads.imagery.datasets import ETH_PIXEL_M, LOCAL_CRS
+from gisroads.geo import LOCAL_CRS
+from gisroads.imagery.datasets import ETH_PIXEL_M
 from gisroads.imagery.segments import (default_counts, edge_strength, frame_to_labels,
                                        ndvi_affinity, segment_image, segments_to_frame)
 from gisroads.io.raster import read_raster

@@ -48,7 +48,7 @@ def test_model_from_70_percent_of_the_roads_finds_the_other_30(scene_image):
 def _five_roads():
     """Five grey roads alike (8 m) on a noisy field, 200 x 200 m at 0.5 m, and their
     centre lines; the second (row 160) is the one left out of the layers below."""
-    from gisroads.imagery.datasets import LOCAL_CRS, local_transform
+    from gisroads.geo import LOCAL_CRS, local_transform
 
     size, pixel_m, rows_y = 400, 0.5, (60, 160, 260, 340)
     rows, cols = np.mgrid[:size, :size]

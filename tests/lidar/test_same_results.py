@@ -71,7 +71,7 @@ def fusa_stages(path: Path) -> dict:
     from gisroads.lidar.ground import ground_planes
     from gisroads.lidar.hypotheses import L_MAX, likelihood_maps, road_hypotheses
     from gisroads.lidar.mincover import greedy_min_cover
-    from gisroads.lidar.tilestore import open_store
+    from gisroads.tiling.tilestore import open_store
 
     store = open_store(path, None)
     try:

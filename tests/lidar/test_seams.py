@@ -5,7 +5,7 @@ import shapely
 
 from gisroads.evaluate import buffer_metrics
 from gisroads.lidar.pipeline import extract_roads
-from gisroads.lidar.tiles import tile_grid
+from gisroads.tiling.tiles import tile_grid
 from gisroads.synthetic import make_scene, write_cloud
 
 

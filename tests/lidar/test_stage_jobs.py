@@ -10,7 +10,7 @@ from gisroads.io.vector import list_layers, read_layer, write_geopackage
 from gisroads.jobs import (ground_intensity_job, lidar_segmentation_job, likelihood_job,
                            min_cover_job, rectangles_network_job)
 from gisroads.lidar.pipeline import extract_tile
-from gisroads.lidar.tiles import Tile
+from gisroads.tiling.tiles import Tile
 from gisroads.synthetic import make_scene, write_cloud
 
 LENGTHS = (40.0, 80.0, 150.0)

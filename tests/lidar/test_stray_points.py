@@ -8,7 +8,7 @@ import textwrap
 import laspy
 import numpy as np
 
-from gisroads.lidar.tiles import tile_grid
+from gisroads.tiling.tiles import tile_grid
 from gisroads.synthetic import make_scene, write_cloud
 
 

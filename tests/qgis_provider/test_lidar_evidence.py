@@ -1,5 +1,5 @@
 """The LiDAR evidence cue through qgis_process: the stage algorithm's raster chained into
-Road raster to network, and the whole-pipeline algorithm with CUE=evidence."""
+Road raster to network, and the whole-pipeline algorithm with its default, the evidence cue."""
 import geopandas as gpd
 import pytest
 import rasterio
@@ -32,14 +32,14 @@ def test_evidence_stage_chained_into_the_raster_network(qgis_process, scene_clou
     assert scores.completeness >= 0.85 and scores.correctness >= 0.85
 
 
-def test_whole_pipeline_with_the_evidence_cue(qgis_process, scene_cloud, tmp_path):
+def test_whole_pipeline_with_the_default_evidence_cue(qgis_process, scene_cloud, tmp_path):
     scene, cloud = scene_cloud
     out = tmp_path / "roads.gpkg"
-    result = qgis_process.run("lidarroadnetwork", INPUT=cloud, CUE=1, OUTPUT=out,
+    result = qgis_process.run("lidarroadnetwork", INPUT=cloud, OUTPUT=out,
                               RASTERS=tmp_path / "rasters")
     assert result["JUNCTIONS"] >= 1
     lines = gpd.read_file(out, layer="road_centrelines")
     assert lines.cues.str.contains("intensity").all()
     assert buffer_metrics(lines, scene.truth.centrelines, buffer_m=3.0).completeness >= 0.85
     assert (tmp_path / "rasters" / "road_evidence.tif").exists()
-    assert "gap_edges" in list_layers(out)
+    assert {"gap_edges", "service_centrelines"} <= set(list_layers(out))

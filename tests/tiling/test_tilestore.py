@@ -6,10 +6,10 @@ import pytest
 import shapely
 from pyproj import CRS
 
-import gisroads.lidar.tilestore as tilestore
+import gisroads.tiling.tilestore as tilestore
 from gisroads.io.las import LasError, LasPointWriter, read_las
 from gisroads.lidar.pipeline import extract_roads
-from gisroads.lidar.tilestore import las_inputs, open_store
+from gisroads.tiling.tilestore import las_inputs, open_store
 from gisroads.synthetic import make_scene, write_cloud
 
 

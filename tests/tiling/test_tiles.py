@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import shapely
 
-from gisroads.lidar.tiles import Tile, clip_to_core, merge_pieces, stitch_tiles, tile_grid
+from gisroads.tiling.tiles import Tile, clip_to_core, merge_pieces, stitch_tiles, tile_grid
 
 
 def test_grid_follows_the_paper_and_cores_partition_the_extent():

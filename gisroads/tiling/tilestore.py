@@ -102,6 +102,28 @@ def digest(value) -> str:
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
+def code_fingerprint(sources, modules=()) -> str:
+    """A short hash of gisroads' own source files and of libraries' versions, for the key
+    of finished work kept in a work folder: work done by another version of the code is not
+    reused.
+
+    Parameters
+    ----------
+    sources : sequence of str
+        Glob patterns relative to the ``gisroads`` package folder (``"lidar/*.py"``).
+    modules : sequence of module
+        Libraries whose ``__version__`` the work depends on.
+    """
+    sha = hashlib.sha1()
+    root = Path(__file__).resolve().parents[1]
+    for source in sorted({p for pattern in sources for p in root.glob(pattern) if p.is_file()}):
+        sha.update(str(source.relative_to(root)).encode())
+        sha.update(source.read_bytes())
+    for module in modules:
+        sha.update(f"{module.__name__} {module.__version__}".encode())
+    return sha.hexdigest()[:16]
+
+
 def inputs_crs(paths: list[Path]) -> tuple[CRS | None, CRS | None]:
     """``(working metre CRS, file CRS)`` shared by all inputs (LasError when they differ)."""
     first = cloud_crs(paths[0])
@@ -162,7 +184,7 @@ class TileStore:
 
     @property
     def tiles(self) -> list[Tile]:
-        """The tiles holding points (:func:`gisroads.lidar.tiles.tile_grid`), row by row."""
+        """The tiles holding points (:func:`gisroads.tiling.tiles.tile_grid`), row by row."""
         if not self.cells:
             return []
         cells = np.array(sorted(self.cells), float)
@@ -273,7 +295,7 @@ def open_store(source, work_dir=None, *, tile_m: float = 300.0, overlap_m: float
         Where the store is kept; by default a new temporary folder (remove it with
         :meth:`TileStore.remove`).
     tile_m, overlap_m : float
-        The tile grid (:func:`gisroads.lidar.tiles.tile_grid`).
+        The tile grid (:func:`gisroads.tiling.tiles.tile_grid`).
     chunk_size : int
         Points decoded at a time.
     workers, scheduler
