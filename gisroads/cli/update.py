@@ -1,4 +1,4 @@
-"""``gisroads update``: extracted roads compared with a road database (issue 11)."""
+"""``gisroads update``: extracted roads compared with a road database."""
 from pathlib import Path
 
 from .options import _positive, add_command, job_default

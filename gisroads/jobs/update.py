@@ -1,4 +1,4 @@
-"""The road database update job (issue 11): an extraction compared with a road database."""
+"""The road database update job: an extraction compared with a road database."""
 from __future__ import annotations
 
 from pathlib import Path

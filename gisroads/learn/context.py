@@ -1,6 +1,6 @@
 """Auto-context: a road probability re-scored from its own shape around each pixel.
 
-Beyond the papers (issue 15). A per-pixel classifier sees each pixel with its colour and
+Beyond the papers. A per-pixel classifier sees each pixel with its colour and
 texture, but not whether the probability it gives forms a long, narrow band, which is what
 a road is and what a driveway, a roof or a field margin is not. Following Tu and Bai's
 auto-context (IEEE PAMI 32(10), 2010), a second model of boosted trees takes as features
@@ -32,7 +32,7 @@ LINE_LENGTHS_M = (24.0, 48.0, 96.0)
 #: The context model predicts every second pixel of the working grid's rows and columns
 #: (:func:`context_probability`): on the 13 benchmark images the default path's quality was
 #: 0.324 against 0.316 predicting every pixel (the context model's first version, lines over
-#: 24 m and 48 m; issue 15), in a quarter of the trees' time.
+#: 24 m and 48 m), in a quarter of the trees' time.
 STRIDE = 2
 DEFAULT_CONTEXT_MODEL_PATH = (Path(__file__).resolve().parent / "models"
                               / "default_context_model.npz")

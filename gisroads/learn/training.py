@@ -496,13 +496,8 @@ def fit_to_image(grid: WorkGrid, probability: np.ndarray, model: RoadModel, *,
     samples : int
         Samples drawn, half road.
     max_iter : int
-        Trees of the image's own model. 30 rather than 60 (issue 15, the 13 benchmark
-        images through the default path at 0.4, 49-feature bundled model of 4731bb6): mean
-        quality 0.298 against 0.297 (Paris 0.259 / 0.286, DeepGlobe 0.037 / 0.021,
-        Massachusetts 0.298 / 0.290, ETH 0.451 / 0.457, Vegas 0.091 / 0.094: within the
-        noise of single images), mean held-out pixel AUC 0.810 against 0.803, and the fit
-        and the adapted prediction half as long (with the 42-feature model: 0.272 against
-        0.270, 2.7 against 3.3 s on a 1000 x 1000 tile at 1 m on one core).
+        Trees of the image's own model: 30 found as much as 60 in half the time (figures in
+        the CHANGELOG's history).
     seed, tile_px, **fit_params
         Of the sampling and :func:`~gisroads.learn.model.fit_model`.
 

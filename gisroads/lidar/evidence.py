@@ -132,29 +132,7 @@ network at most 0.011, autzen's by its river up to 0.12); Megaplot's two shores 
 road along a lake or river with no verge between it and the water is lost the same way
 (beyond the paper, like this whole module).
 
-**Measured** (``bench/lidar_evidence.py``; pixel ROC AUC against the truth road area, NaN
-counted as 0): fusa.laz 0.860 (intensity alone 0.818, height 0.726, roughness 0.657,
-slope 0.643, density 0.628, returns 0.582, classification 0.572), in about 0.5 s for its
-277,573 points; the thinned IGN tile (1.9 m cells, truth partial) 0.809, 75 % of its truth
-road cells above 0.5; above 0.5 on 7 % of the Megaplot forest plot, 2 % of crop_1's field
-and 19 % of the zurich campus (its paved access ways); a synthetic scene 0.948 (with the
-intensity ramp's none end at 0.8: 0.870, 0.806, 8 %, 5 %, 26 %, 0.950).
-
-**Network** (``bench/lidar_evidence_network.py``, every variant on every file): through
-:func:`gisroads.network.rasters.raster_to_network` with ``threshold=0.8``,
-``part_options={"low_threshold": 0.6}`` (hysteresis) and the car-park aisles taken out
-(:func:`without_car_park_aisles`, a second run), 3 m buffer: fusa completeness 0.799,
-correctness 0.592 (0.693 counting its car-park aisles as right), 4 of 7 junctions; the IGN
-tile completeness 0.748; no line on zurich, crop_1 and the extra-bytes file, 0.39 km on the
-Megaplot forest plot (its ponds and their shores: 0.02 km with the ``pulses`` cue and the
-shores out, issue 10), 0.75 km on autzen; the synthetic street grid
-0.989 / 1.000, the scene with every feature 0.982 / 0.940. Before (ramp to 0.8, threshold
-0.8 alone): fusa 0.800 / 0.464, IGN 0.613, zurich 0.016 km, Megaplot 0.42 km, extra-bytes
-0.33 km, the synthetic scenes 0.991 / 1.000 and 0.894 / 0.924. With the ``kerbs`` cue
-(through :func:`gisroads.lidar.pipeline.extract_roads`, shores out too): fusa 0.810 / 0.599
-(0.799 / 0.593 without), 5 of 7 junctions, SER's divided end drawn as its two carriageways;
-the scene with every feature 0.986 / 0.941 (0.982 / 0.940); the clean grid, the IGN tile
-(cells of 1.9 m: no kerbs), zurich, crop_1, Megaplot and the extra-bytes file unchanged.
+Figures: ``docs/lidar.md`` (measured by ``make bench`` and ``bench/lidar_evidence*.py``).
 """
 from __future__ import annotations
 

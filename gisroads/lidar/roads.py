@@ -28,7 +28,7 @@ METHOD = "zhu-mordohai"
 #: The network stage's options for rectangles: an end reaching past a crossing road by its
 #: half width plus the chaining distance (5 m) ends there, as rectangles overshoot a
 #: junction by up to their sliding step; a connection outside the rectangles (grown 2 m)
-#: over more than 15 m is refused (measured on fusa and the synthetic scenes, issue 14).
+#: over more than 15 m is refused (measured on fusa and the synthetic scenes).
 RECTANGLE_NETWORK_OPTIONS = {**NETWORK_OPTIONS, "overshoot_m": JOIN_GAP_M,
                              "max_unsupported_m": 15.0}
 SUPPORT_MARGIN_M = 2.0
