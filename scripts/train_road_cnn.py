@@ -177,7 +177,8 @@ def write_card(path: Path, metadata: dict, scores: dict, mean_iou: dict) -> None
         f"{metadata['parameters']:,} parameters, trained from scratch.",
         f"- Working pixel size: {metadata['pixel_m']} m (images are resampled to it).",
         *_earlier_cycles(metadata.get("continued_from")),
-        f"- Training{' (last cycle)' if 'continued_from' in metadata else ''}: "
+        f"- Training (cycle {len(_earlier_cycles(metadata.get('continued_from'))) + 1}"
+        f"{', the last' if 'continued_from' in metadata else ', from scratch'}): "
         f"{metadata['steps']} steps of {metadata['batch']} crops of "
         f"{metadata['crop_px']} px, seed {metadata['seed']}, one-cycle peak learning rate "
         f"{metadata['learning_rate']:g}, "
@@ -204,15 +205,15 @@ def write_card(path: Path, metadata: dict, scores: dict, mean_iou: dict) -> None
 
 def _earlier_cycles(earlier: dict | None) -> list[str]:
     """Card lines for the cycles a model was trained in before its last one, first first."""
-    cycles = []
+    chain = []
     while earlier:
-        cycles.insert(0, f"- Earlier cycle: {earlier['steps']} steps of {earlier['batch']} "
-                         f"crops of {earlier['crop_px']} px, seed {earlier['seed']}, one-cycle "
-                         f"peak learning rate {earlier.get('learning_rate') or 3e-3:g}, "
-                         f"{earlier['training_seconds'] / 60:.0f} min (from scratch when first).")
+        chain.insert(0, earlier)
         earlier = earlier.get("continued_from")
-    return cycles
-
+    return [f"- Cycle {k}{' (from scratch)' if k == 1 else ''}: {cycle['steps']} steps of "
+            f"{cycle['batch']} crops of {cycle['crop_px']} px, seed {cycle['seed']}, one-cycle "
+            f"peak learning rate {cycle.get('learning_rate') or 3e-3:g}, "
+            f"{cycle['training_seconds'] / 60:.0f} min."
+            for k, cycle in enumerate(chain, start=1)]
 
 if __name__ == "__main__":
     main()

@@ -35,6 +35,9 @@ TILE_PX = 1024
 """Side of the tiles the network sees, working pixels."""
 OVERLAP_PX = 64
 """Overlap of neighbouring tiles, working pixels: their predictions are blended across it."""
+VIEWS = 2
+"""Views of each tile averaged by default (:func:`convnet_probability`): the tile and its
+half-turn, chosen on the held-out training tiles (figures in docs/imagery.md)."""
 FINE_TUNE_STEPS = 150
 """Optimiser steps of :func:`gisroads.learn.convnet_training.fine_tune_on_layer` (8 crops of
 224 working pixels each): about 25 passes over a 1500 x 1500 tile at 1 m, about two minutes
@@ -233,20 +236,28 @@ class _Resampler:
         return rgb_bands(crop.data), valid_pixels(crop)
 
 
-def _predict(model: ConvNet, x: np.ndarray, flips: bool) -> np.ndarray:
-    """Road probability of one network input ``(1, 3, rows, cols)``; with ``flips`` the mean
-    over the input and its three mirror images (a batch of four)."""
-    if not flips:
-        logit = model.session.run(None, {"image": x})[0][0, 0]
-        return 1.0 / (1.0 + np.exp(-logit))
-    batch = np.concatenate([x, x[..., ::-1, :], x[..., :, ::-1], x[..., ::-1, ::-1]])
+#: The views of a tile that the network sees, as (rows reversed, columns reversed): the tile,
+#: then its half-turn, then its two mirror images.
+_VIEWS = ((False, False), (True, True), (True, False), (False, True))
+
+
+def _view(array: np.ndarray, flip_rows: bool, flip_cols: bool) -> np.ndarray:
+    """``array`` with its last two axes reversed as asked (its own inverse)."""
+    return array[..., ::-1 if flip_rows else 1, ::-1 if flip_cols else 1]
+
+
+def _predict(model: ConvNet, x: np.ndarray, views: int) -> np.ndarray:
+    """Road probability of one network input ``(1, 3, rows, cols)``: the mean over the
+    first ``views`` of :data:`_VIEWS`, run as one batch."""
+    chosen = _VIEWS[:views]
+    batch = np.concatenate([_view(x, *view) for view in chosen])
     p = 1.0 / (1.0 + np.exp(-model.session.run(None, {"image": batch})[0][:, 0]))
-    return (p[0] + p[1][::-1, :] + p[2][:, ::-1] + p[3][::-1, ::-1]) / 4
+    return sum(_view(p[k], *view) for k, view in enumerate(chosen)) / len(chosen)
 
 
 def convnet_probability(image: GeoRaster, model: ConvNet | None = None, *,
                         tile_px: int = TILE_PX, overlap_px: int = OVERLAP_PX,
-                        flips: bool = False, progress: Progress = None) -> GeoRaster:
+                        views: int = VIEWS, progress: Progress = None) -> GeoRaster:
     """Road probability of every pixel of an image from the convolutional road model.
 
     Parameters
@@ -259,9 +270,9 @@ def convnet_probability(image: GeoRaster, model: ConvNet | None = None, *,
         The bundled model (:func:`load_convnet`) when None.
     tile_px, overlap_px : int
         Tile side and overlap on the model's working grid, pixels.
-    flips : bool
-        Average the probabilities of the image and its three mirror images (four times
-        the network's work).
+    views : {1, 2, 4}
+        Views of each tile averaged (test-time augmentation): the tile alone; with its
+        half-turn; with its two mirror images too. Each costs one run of the network.
     progress : callable, optional
         ``progress(fraction, message)`` after each tile; may raise
         :class:`gisroads.progress.Cancelled`.
@@ -277,6 +288,8 @@ def convnet_probability(image: GeoRaster, model: ConvNet | None = None, *,
         Geographic or unit-less CRS, rotated pixels, 2-band image, no valid pixel.
     """
     model = load_convnet() if model is None else model
+    if views not in (1, 2, 4):
+        raise GisroadsError(f"views must be 1, 2 or 4, not {views!r}")
     if overlap_px >= tile_px // 2:
         raise GisroadsError("overlap_px must be less than half of tile_px")
     grid = _Resampler(image, model.pixel_m)
@@ -295,7 +308,7 @@ def convnet_probability(image: GeoRaster, model: ConvNet | None = None, *,
         if valid.any():
             x = np.zeros((1, 3, tile_r, tile_c), np.float32)
             x[0, :, :r1 - r0, :c1 - c0] = network_input(bands, valid, low, high)
-            p = _predict(model, x, flips)[:r1 - r0, :c1 - c0].astype(np.float32)
+            p = _predict(model, x, views)[:r1 - r0, :c1 - c0].astype(np.float32)
             weight = _blend_weight(r1 - r0, c1 - c0, overlap_px)
             total[r0:r1, c0:c1] += weight * p
             weights[r0:r1, c0:c1] += weight

@@ -163,6 +163,36 @@ def test_other_pixel_sizes_come_back_on_their_own_grid(bundled, pixel_m):
     assert np.nanmin(p.data) >= 0.0 and np.nanmax(p.data) <= 1.0
 
 
+@pytest.fixture(scope="module")
+def scene_at_working_pixel() -> GeoRaster:
+    """320 x 320 pixels at the working 1 m: one tile, no resampling, no padding."""
+    image, _ = render_image(make_scene(seed=3, size_m=(320.0, 320.0)), pixel_m=1.0)
+    assert image.shape == (320, 320)
+    return GeoRaster(image.data[:3].copy(), image.transform, image.crs)
+
+
+@pytest.mark.parametrize("views, turns", [(2, [(True, True)]),
+                                          (4, [(True, True), (True, False), (False, True)])])
+def test_averaged_views_make_the_probability_turn_with_the_image(bundled,
+                                                                 scene_at_working_pixel,
+                                                                 views, turns):
+    image = scene_at_working_pixel
+    alone = convnet_probability(image, bundled, views=1).data
+    averaged = convnet_probability(image, bundled, views=views).data
+    for flip_rows, flip_cols in turns:
+        def turn(array):
+            return array[..., ::-1 if flip_rows else 1, ::-1 if flip_cols else 1]
+        turned = _like(image, np.ascontiguousarray(turn(image.data)))
+        # the network alone is not equivariant; the average over the views is
+        assert np.abs(turn(convnet_probability(turned, bundled, views=1).data)
+                      - alone).max() > 1e-3
+        np.testing.assert_allclose(turn(convnet_probability(turned, bundled,
+                                                            views=views).data),
+                                   averaged, atol=1e-5)
+    with pytest.raises(ValueError, match="views"):
+        convnet_probability(image, bundled, views=3)
+
+
 def test_images_the_model_cannot_measure_are_refused(bundled, scene_rgb):
     geographic = GeoRaster(scene_rgb.data, Affine(1e-5, 0, 15.0, 0, -1e-5, 45.0),
                            CRS.from_epsg(4326))
@@ -286,6 +316,6 @@ def test_probabilities_are_the_same_in_both_environments(bundled):
     image, _ = render_image(scene, pixel_m=0.75)
     p = convnet_probability(GeoRaster(image.data[:3], image.transform, image.crs), bundled).data
     pixels = ([50, 100, 200, 300, 350, 189], [60, 200, 140, 390, 20, 184])
-    np.testing.assert_allclose(p[pixels], [0.035233, 0.001632, 0.001939, 0.002195, 0.012855,
-                                           0.999045], atol=1e-5)
-    assert float(np.nanmean(p)) == pytest.approx(0.236078, abs=1e-5)
+    np.testing.assert_allclose(p[pixels], [0.068083, 0.003236, 0.004659, 0.001682, 0.025405,
+                                           0.99913], atol=1e-5)
+    assert float(np.nanmean(p)) == pytest.approx(0.234209, abs=1e-5)
