@@ -145,12 +145,12 @@ def test_demo_runs_both_pipelines_on_the_bundled_data(tmp_path):
     assert result.returncode == 0, result.stderr
     demo = json.loads(result.stdout)
     # the default path: the convolutional network's probability through the network stage;
-    # on this tile it draws the N-S street, most of the NE street and half of the SE one
-    # (5 roads, 347 m), not the streets in shadow
+    # on this tile it draws the N-S street, most of the NE street and the SE one (4 roads,
+    # 379 m), not the street in shadow
     assert demo["image"]["cues"] == "model" and demo["image"]["model"] == "road_convnet.onnx"
     assert demo["image"]["roads"] >= 4 and demo["image"]["length_m"] > 250
     # OpenStreetMap's lines run 2-5 m off the road centres: a 3 m buffer scores low for any
-    # method (measured completeness 0.35, correctness 0.65; the boosted trees 0.28 / 0.79,
+    # method (measured completeness 0.42, correctness 0.73; the boosted trees 0.28 / 0.79,
     # the papers' pipeline alone 0.23 / 0.40)
     buffer = demo["image_evaluation"]["buffer"]
     assert buffer["completeness"] > 0.3 and buffer["correctness"] > 0.55
