@@ -6,12 +6,14 @@ several seeds, and the change layers of gisroads.update.conflate are scored per 
 (score_changes), pooled over the seeds:
 
 * ``synthetic_truth``: a synthetic scene's truth as the extraction (the method's ceiling);
-* ``synthetic_lidar``: the LiDAR pipeline's output on a scene's simulated cloud;
+* ``synthetic_lidar``: the LiDAR pipeline's output (its default cue) on a scene's simulated
+  cloud;
 * ``synthetic_imagery``: the imagery pipeline's output on the same scene's R,G,B,NIR image;
-* ``fusa``: the LiDAR pipeline's output on fusa.laz against its hand-digitised centre lines
-  (``--fusa-roads`` reuses a finished ``gisroads lidar`` GeoPackage), fakes kept clear of the
-  paved areas the truth leaves out (gisroads.update.truth_pavement);
-* ``fusa_evidence``: the same with the evidence cue (``--cue evidence``).
+* ``fusa``: the LiDAR pipeline's output (its default cue, the evidence) on fusa.laz against
+  its hand-digitised centre lines (``--fusa-roads`` reuses a finished ``gisroads lidar``
+  GeoPackage), fakes kept clear of the paved areas the truth leaves out
+  (gisroads.update.truth_pavement);
+* ``fusa_intensity``: the same with the paper's cue alone (``--cue intensity``).
 
 Class ``new`` is the deleted roads found again, ``missing`` the fake roads flagged missing.
 
@@ -43,9 +45,9 @@ def scene_edges(scene) -> gpd.GeoDataFrame:
                                    on="road_id")
 
 
-def lidar_roads(cloud: Path, out: Path, cue: str = "intensity") -> gpd.GeoDataFrame:
-    """The LiDAR pipeline's centre lines of ``cloud`` with ``cue`` (written to ``out``)."""
-    lidar_job(cloud, out, cue=cue)
+def lidar_roads(cloud: Path, out: Path, **options) -> gpd.GeoDataFrame:
+    """The LiDAR pipeline's centre lines of ``cloud`` (written to ``out``)."""
+    lidar_job(cloud, out, **options)
     return read_layer(out)
 
 
@@ -79,11 +81,11 @@ def measure(out: Path, seeds: int = 10, fusa_roads: Path | None = None) -> dict:
     pavement = truth_pavement(FUSA_TRUTH.parent, FUSA_UNLABELLED_PAVEMENT)
     results["fusa"] = pooled_scores(fusa, truth, edits, fake_length_m=(20.0, 40.0),
                                     fake_clearance_m=15.0, pavement=pavement)
-    fusa_evidence = lidar_roads(LIDAR / "fusa.laz", out / "fusa_evidence_roads.gpkg",
-                                cue="evidence")
-    results["fusa_evidence"] = pooled_scores(fusa_evidence, truth, edits,
-                                             fake_length_m=(20.0, 40.0),
-                                             fake_clearance_m=15.0, pavement=pavement)
+    fusa_intensity = lidar_roads(LIDAR / "fusa.laz", out / "fusa_intensity_roads.gpkg",
+                                 cue="intensity")
+    results["fusa_intensity"] = pooled_scores(fusa_intensity, truth, edits,
+                                              fake_length_m=(20.0, 40.0),
+                                              fake_clearance_m=15.0, pavement=pavement)
     return results
 
 
