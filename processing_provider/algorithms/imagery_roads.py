@@ -96,6 +96,7 @@ class ImageryRoadNetwork(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
+        image = self.parameterAsRasterLayer(parameters, "INPUT", context)
         dsm = self.parameterAsRasterLayer(parameters, "DSM", context)
         options = {}
         model = (self.parameterAsFile(parameters, "MODEL", context)
@@ -110,7 +111,7 @@ class ImageryRoadNetwork(GisroadsAlgorithm):
             options["n_segments"] = self.parameterAsInt(parameters, "SEGMENTS", context)
         with gisroads_errors(feedback):
             result = image_job(
-                self.parameterAsRasterLayer(parameters, "INPUT", context).source(), out,
+                image.source(), out,
                 **band_options(self, parameters, context),
                 dsm_path=dsm.source() if dsm is not None else None, model=model,
                 context="default" if self.parameterAsBool(parameters, "USE_CONTEXT", context)
@@ -121,7 +122,7 @@ class ImageryRoadNetwork(GisroadsAlgorithm):
               else ("segments", "road_parts"))
         load_geopackage_on_completion(context, out, (
             *qa, "gap_edges", "junction_connections", POLYGONS, CENTRELINES, JUNCTIONS),
-            group="roads")
+            title=image.name())
         outputs = {"PROBABILITY": str(result["probability"])} if "probability" in result else {}
         return {"OUTPUT": out, "CUES": result["cues"], **outputs,
                 **self.network_outputs(result, feedback, f"; cues: {result['cues']}")}

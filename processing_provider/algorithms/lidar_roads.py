@@ -1,4 +1,6 @@
 """LiDAR road network (Zhu & Mordohai): the whole pipeline from a LAS/LAZ file."""
+from pathlib import Path
+
 from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterFolderDestination, QgsProcessingParameterNumber,
                        QgsProcessingParameterString)
@@ -91,9 +93,10 @@ class LidarRoadNetwork(GisroadsAlgorithm):
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
         tagged = self.parameterAsFileOutput(parameters, "TAGGED_LAS", context) or None
         rasters = self.parameterAsString(parameters, "RASTERS", context) or None
+        cloud = self.parameterAsFile(parameters, "INPUT", context)
         with gisroads_errors(feedback):
             result = lidar_job(
-                self.parameterAsFile(parameters, "INPUT", context), out, tagged_las=tagged,
+                cloud, out, tagged_las=tagged,
                 rasters_dir=rasters, progress=progress_callback(feedback),
                 cue=CUES[self.parameterAsEnum(parameters, "CUE", context)],
                 threshold=self.parameterAsDouble(parameters, "THRESHOLD", context),
@@ -110,6 +113,6 @@ class LidarRoadNetwork(GisroadsAlgorithm):
         qa = (("hypotheses", "rectangles") if result["cue"] == "intensity"
               else ("rejected", "gap_edges", "junction_connections", SERVICE_CENTRELINES))
         load_geopackage_on_completion(context, out, (*qa, POLYGONS, CENTRELINES, JUNCTIONS),
-                                      group="roads")
+                                      title=Path(cloud).stem)
         return {"OUTPUT": out, "TAGGED_LAS": tagged, "RASTERS": rasters,
                 **self.network_outputs(result, feedback)}

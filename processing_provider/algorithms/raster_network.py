@@ -53,15 +53,16 @@ class RoadRasterToNetwork(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
+        raster = self.parameterAsRasterLayer(parameters, "INPUT", context)
         with gisroads_errors(feedback):
             result = vectorize_job(
-                self.parameterAsRasterLayer(parameters, "INPUT", context).source(), out,
+                raster.source(), out,
                 band=self.parameterAsInt(parameters, "BAND", context),
                 threshold=self.parameterAsDouble(parameters, "THRESHOLD", context),
                 progress=progress_callback(feedback))
         load_geopackage_on_completion(context, out, (
             "rejected", "gap_edges", "junction_connections", POLYGONS, CENTRELINES,
-            JUNCTIONS), group="roads")
+            JUNCTIONS), title=raster.name())
         return {"OUTPUT": out, "GAPS_BRIDGED": result["gaps_bridged"],
                 **self.network_outputs(result, feedback,
                                        f"; {result['gaps_bridged']} gaps bridged")}

@@ -153,3 +153,38 @@ def test_segments_style_tells_road_parts_from_rejected_segments(qgis_app, fields
                for f in layer.getFeatures()]
     renderer.stopRender(context)
     assert matched == [[label] for label in labels]
+
+
+def test_a_run_loads_its_layers_named_after_the_input_with_the_qa_layers_hidden(
+        run_algorithm, qgis_processing, lidar_dir, tmp_path):
+    """What the toolbox dialog does when the algorithm ends (Processing's
+    handleAlgorithmResults): the layers are named after the input, styled, the road network
+    ticked and the QA layers unticked."""
+    from processing.gui.Postprocessing import handleAlgorithmResults
+    from qgis.core import (QgsApplication, QgsProcessingContext, QgsProcessingFeedback,
+                           QgsProject)
+
+    project = QgsProject.instance()
+    project.clear()
+    algorithm = QgsApplication.processingRegistry().createAlgorithmById(
+        "gisroads:lidarroadnetwork")
+    context = QgsProcessingContext()
+    context.setProject(project)
+    feedback = QgsProcessingFeedback()
+    params = {"INPUT": str(lidar_dir / "fusa.laz"), "OUTPUT": str(tmp_path / "roads.gpkg")}
+    assert algorithm.prepare(params, context, feedback)
+    algorithm.runPrepared(params, context, feedback)
+    try:
+        assert handleAlgorithmResults(algorithm, context, feedback, parameters=params)
+        ticked = {node.name(): node.itemVisibilityChecked()
+                  for node in project.layerTreeRoot().findLayers()}
+        assert ticked == {"fusa – road centre lines": True, "fusa – road polygons": True,
+                          "fusa – junctions": True, "fusa – service ways": True,
+                          "fusa – bridged gaps (QA)": False,
+                          "fusa – junction connections (QA)": False,
+                          "fusa – rejected parts (QA)": False}
+        lines = project.mapLayersByName("fusa – road centre lines")[0]
+        assert lines.featureCount() > 20
+        assert lines.renderer().symbol().color().name() == "#e31a1c"  # styles/*.qml
+    finally:
+        project.clear()
