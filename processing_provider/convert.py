@@ -10,13 +10,14 @@ import shapely
 from pyproj import CRS
 from qgis.core import (QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink, QgsField,
                        QgsFields, QgsGeometry, QgsProcessingException,
-                       QgsProcessingLayerPostProcessorInterface, QgsVectorLayer, QgsWkbTypes)
+                       QgsVectorLayer, QgsWkbTypes)
 from qgis.PyQt.QtCore import QVariant
 
 from gisroads.errors import INPUT_ERRORS, reported_warnings
-from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS, SERVICE_CENTRELINES
 from gisroads.io.vector import STYLES_DIR
 from gisroads.progress import Cancelled
+
+from .loading import ApplyStyle, on_load
 
 
 def to_pyproj(crs: QgsCoordinateReferenceSystem) -> CRS | None:
@@ -133,68 +134,11 @@ def gisroads_errors(feedback=None):
         raise QgsProcessingException(str(err)) from None
 
 
-class _ApplyStyle(QgsProcessingLayerPostProcessorInterface):
-    """Applies a gisroads QML style to an output layer when QGIS loads it, and hides the
-    layer in the layer tree when it is a QA layer."""
-
-    def __init__(self, qml_path: str | None, *, visible: bool = True):
-        super().__init__()
-        self.qml_path = qml_path
-        self.visible = visible
-
-    def postProcessLayer(self, layer, context, feedback):  # noqa: N802
-        if self.qml_path is not None and isinstance(layer, QgsVectorLayer):
-            layer.loadNamedStyle(self.qml_path)
-            layer.triggerRepaint()
-        project = context.project()
-        node = project.layerTreeRoot().findLayer(layer.id()) if project is not None else None
-        if node is not None:
-            node.setItemVisibilityChecked(self.visible)
-
-
-_POST_PROCESSORS = []  # QGIS does not own them: keep them alive until the run ends
-
-#: The road network's own layers: shown when a run loads them; the others it loads beside
-#: them (rectangles, gap edges, rejected parts...) are QA layers, loaded hidden.
-NETWORK_LAYERS = (CENTRELINES, POLYGONS, JUNCTIONS, SERVICE_CENTRELINES)
-
-#: What the layer tree calls a layer (its table name otherwise, underscores as spaces).
-LAYER_TITLES = {CENTRELINES: "road centre lines", POLYGONS: "road polygons",
-                SERVICE_CENTRELINES: "service ways", "gap_edges": "bridged gaps (QA)",
-                "junction_connections": "junction connections (QA)",
-                "rejected": "rejected parts (QA)", "rectangles": "selected rectangles (QA)",
-                "hypotheses": "rectangle hypotheses (QA)", "segments": "segments (QA)",
-                "road_parts": "road parts (QA)"}
-
-
-def style_on_load(context, dest_id: str, layer_name: str, *, visible: bool = True) -> None:
-    """Give the output ``dest_id`` its ``styles/<layer_name>.qml`` when QGIS loads it, and
-    leave it unticked in the layer tree unless ``visible``."""
+def style_on_load(context, dest_id: str, layer_name: str) -> None:
+    """Give the output ``dest_id`` its ``styles/<layer_name>.qml`` when QGIS loads it."""
     qml = STYLES_DIR / f"{layer_name}.qml"
-    if context.willLoadLayerOnCompletion(dest_id) and (qml.exists() or not visible):
-        processor = _ApplyStyle(str(qml) if qml.exists() else None, visible=visible)
-        _POST_PROCESSORS.append(processor)
-        context.layerToLoadOnCompletionDetails(dest_id).setPostProcessor(processor)
-
-
-def load_geopackage_on_completion(context, path: str, layer_names, *, group: str = "",
-                                  title: str | None = None) -> None:
-    """Add layers of a GeoPackage to the project when the algorithm ends, each styled with
-    ``styles/<layer>.qml`` (Processing loads layers without their stored default style).
-
-    Named "``title`` – road centre lines" (:data:`LAYER_TITLES`) with a ``title`` (the
-    input's name), else "``group`` layer". When the network's own layers
-    (:data:`NETWORK_LAYERS`) are among them, the other layers are QA layers: loaded, but
-    unticked."""
-    from qgis.core import QgsProcessingContext
-    network = any(name in NETWORK_LAYERS for name in layer_names)
-    for name in layer_names:
-        uri = f"{path}|layername={name}"
-        shown = (f"{title} – {LAYER_TITLES.get(name, name.replace('_', ' '))}" if title
-                 else f"{group} {name}".strip())
-        context.addLayerToLoadOnCompletion(
-            uri, QgsProcessingContext.LayerDetails(shown, context.project(), name))
-        style_on_load(context, uri, name, visible=not network or name in NETWORK_LAYERS)
+    if qml.exists():
+        on_load(context, dest_id, ApplyStyle(str(qml)))
 
 
 def open_geopackage_layers(path: str) -> list[tuple[str, QgsVectorLayer, bool]]:

@@ -8,7 +8,8 @@ progress as JSON lines on stderr (``--progress-json``) and its result as JSON on
 (``--json``); a cancel terminates it (SIGTERM: it removes what it was writing).
 
 Standard library and qgis only: this module must import where gisroads cannot. So far one
-algorithm runs this way, the whole LiDAR pipeline; the others need the packages in QGIS.
+algorithm runs this way, the whole LiDAR pipeline (its layers loaded as in-process:
+:mod:`.loading`); the others need the packages in QGIS.
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import json
 import os
 import shutil
 import subprocess
+from pathlib import Path
 
 from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingOutputNumber, QgsProcessingParameterEnum,
@@ -23,6 +25,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingProvider, QgsSettings)
 
 from .algorithms.base import workers_parameter
+from .loading import load_geopackage_on_completion
 
 SETTING = "gisroads/executable"
 
@@ -146,12 +149,13 @@ class ExternalLidarRoadNetwork(QgsProcessingAlgorithm):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
         cue = self.CUES[self.parameterAsEnum(parameters, "CUE", context)]
+        cloud = self.parameterAsFile(parameters, "INPUT", context)
         result = run_external(self.executable, [
-            "lidar", self.parameterAsFile(parameters, "INPUT", context), "-o", out,
-            "--cue", cue,
+            "lidar", cloud, "-o", out, "--cue", cue,
             "--workers", str(self.parameterAsInt(parameters, "WORKERS", context))], feedback)
         feedback.pushInfo(f"{result['roads']} roads, {result['length_m']:.0f} m, "
                           f"{result['junctions']} junctions")
+        load_geopackage_on_completion(context, out, title=Path(cloud).stem)
         return {"OUTPUT": out, "ROADS": result["roads"], "LENGTH_M": result["length_m"],
                 "JUNCTIONS": result["junctions"]}
 

@@ -7,7 +7,8 @@ from gisroads.errors import GisroadsError
 from gisroads.lidar.blocks import MAX_EDGE_M, SAMPLE_SPACING_M
 from gisroads.jobs import blocks_job
 
-from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
+from ..convert import gisroads_errors, progress_callback
+from ..loading import load_geopackage_on_completion
 from .base import GisroadsAlgorithm
 
 

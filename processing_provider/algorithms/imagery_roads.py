@@ -7,7 +7,8 @@ from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.imagery.segments import MIN_SEGMENT_PX, SEGMENT_AREA_M2
 from gisroads.jobs import image_job
 
-from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
+from ..convert import gisroads_errors, progress_callback
+from ..loading import load_geopackage_on_completion
 from .base import GisroadsAlgorithm, network_output
 from .imagery_inputs import band_options, imagery_parameters
 

@@ -10,8 +10,8 @@ from gisroads.network.junctions import (BORDER_M, COLLINEAR_DEG, DEFAULT_QUALITY
                                       strings_to_network)
 from gisroads.io.vector import write_geopackage
 
-from ..convert import (gisroads_errors, load_geopackage_on_completion, progress_callback,
-                       source_to_frame)
+from ..convert import gisroads_errors, progress_callback, source_to_frame
+from ..loading import load_geopackage_on_completion
 from .base import GisroadsAlgorithm, network_output
 
 CONNECTIONS = "junction_connections"

@@ -7,7 +7,8 @@ from gisroads.jobs import likelihood_job, parse_metres
 from gisroads.lidar.hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, T_BD,
                                        T_INT)
 
-from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
+from ..convert import gisroads_errors, progress_callback
+from ..loading import load_geopackage_on_completion
 from .base import GisroadsAlgorithm
 from .lidar_segmentation import level_parameter
 

@@ -8,8 +8,8 @@ from gisroads.jobs import min_cover_job
 from gisroads.lidar.hypotheses import L_MAX
 from gisroads.lidar.mincover import A, D_MAX
 
-from ..convert import (gisroads_errors, load_geopackage_on_completion, progress_callback,
-                       source_to_frame)
+from ..convert import gisroads_errors, progress_callback, source_to_frame
+from ..loading import load_geopackage_on_completion
 from .base import GisroadsAlgorithm
 
 

@@ -4,7 +4,8 @@ from qgis.core import QgsProcessing, QgsProcessingParameterFeatureSource
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import rectangles_network_job
 
-from ..convert import gisroads_errors, load_geopackage_on_completion, source_to_frame
+from ..convert import gisroads_errors, source_to_frame
+from ..loading import load_geopackage_on_completion
 from .base import GisroadsAlgorithm, network_output
 
 

@@ -10,7 +10,8 @@ from gisroads.jobs import lidar_job, parse_metres, stage_default
 from gisroads.lidar.pipeline import CUES, DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, EVIDENCE_THRESHOLD
 from gisroads.parallel import default_workers
 
-from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
+from ..convert import gisroads_errors, progress_callback
+from ..loading import load_geopackage_on_completion
 from .base import GisroadsAlgorithm, cloud_input, network_output, workers_parameter
 
 

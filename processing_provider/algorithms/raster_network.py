@@ -6,7 +6,8 @@ from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import vectorize_job
 from gisroads.network.rasters import THRESHOLD
 
-from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
+from ..convert import gisroads_errors, progress_callback
+from ..loading import load_geopackage_on_completion
 from .base import GisroadsAlgorithm, network_output
 
 

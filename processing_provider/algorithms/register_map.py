@@ -4,8 +4,8 @@ from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFileDest
 
 from gisroads.jobs import register_job, stage_default
 
-from ..convert import (gisroads_errors, load_geopackage_on_completion, progress_callback,
-                       source_to_frame)
+from ..convert import gisroads_errors, progress_callback, source_to_frame
+from ..loading import load_geopackage_on_completion
 from .base import GisroadsAlgorithm, cloud_input, road_map_input
 
 

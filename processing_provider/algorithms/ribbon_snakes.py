@@ -6,7 +6,8 @@ from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import snakes_job
 from gisroads.parallel import default_workers
 
-from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
+from ..convert import gisroads_errors, progress_callback
+from ..loading import load_geopackage_on_completion
 from .base import GisroadsAlgorithm, network_output, workers_parameter
 from .curb_attractor import map_guided_arguments, map_guided_parameters
 

@@ -7,7 +7,8 @@ from qgis.core import (QgsProcessingOutputFile, QgsProcessingOutputRasterLayer,
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import stage_default, synth_job
 
-from ..convert import gisroads_errors, load_geopackage_on_completion, progress_callback
+from ..convert import gisroads_errors, progress_callback
+from ..loading import load_geopackage_on_completion
 from .base import GisroadsAlgorithm
 
 

@@ -108,3 +108,29 @@ def run_algorithm(qgis_app):
 
     yield run
     registry.removeProvider(provider)
+
+
+@pytest.fixture
+def run_and_load(run_algorithm, qgis_processing):
+    """``run_and_load(algorithm, params)``: an algorithm instance run in this process, its
+    outputs then loaded as the toolbox dialog loads them (Processing's
+    handleAlgorithmResults) into the cleared project; returns ``{layer name: ticked}`` of
+    the layer tree. The project is cleared again afterwards."""
+    from processing.gui.Postprocessing import handleAlgorithmResults
+    from qgis.core import QgsProcessingContext, QgsProcessingFeedback, QgsProject
+
+    project = QgsProject.instance()
+
+    def run(algorithm, params):
+        project.clear()
+        context = QgsProcessingContext()
+        context.setProject(project)
+        feedback = QgsProcessingFeedback()
+        assert algorithm.prepare(params, context, feedback)
+        algorithm.runPrepared(params, context, feedback)
+        assert handleAlgorithmResults(algorithm, context, feedback, parameters=params)
+        return {node.name(): node.itemVisibilityChecked()
+                for node in project.layerTreeRoot().findLayers()}
+
+    yield run
+    project.clear()

@@ -155,36 +155,34 @@ def test_segments_style_tells_road_parts_from_rejected_segments(qgis_app, fields
     assert matched == [[label] for label in labels]
 
 
-def test_a_run_loads_its_layers_named_after_the_input_with_the_qa_layers_hidden(
-        run_algorithm, qgis_processing, lidar_dir, tmp_path):
-    """What the toolbox dialog does when the algorithm ends (Processing's
-    handleAlgorithmResults): the layers are named after the input, styled, the road network
-    ticked and the QA layers unticked."""
-    from processing.gui.Postprocessing import handleAlgorithmResults
-    from qgis.core import (QgsApplication, QgsProcessingContext, QgsProcessingFeedback,
-                           QgsProject)
+FUSA_LAYERS = {"fusa – road centre lines": True, "fusa – road polygons": True,
+               "fusa – junctions": True, "fusa – service ways": True,
+               "fusa – bridged gaps (QA)": False, "fusa – junction connections (QA)": False,
+               "fusa – rejected parts (QA)": False}
+"""The layers a LiDAR road network run on fusa adds to the project, and whether each is
+ticked."""
 
-    project = QgsProject.instance()
-    project.clear()
+
+def test_a_run_loads_its_layers_named_after_the_input_with_the_qa_layers_hidden(
+        run_and_load, lidar_dir, tmp_path):
+    """What the toolbox dialog does when the algorithm ends: the layers are named after
+    the input, styled, the road network ticked and the QA layers unticked."""
+    from qgis.core import QgsApplication, QgsProject
+
     algorithm = QgsApplication.processingRegistry().createAlgorithmById(
         "gisroads:lidarroadnetwork")
-    context = QgsProcessingContext()
-    context.setProject(project)
-    feedback = QgsProcessingFeedback()
-    params = {"INPUT": str(lidar_dir / "fusa.laz"), "OUTPUT": str(tmp_path / "roads.gpkg")}
-    assert algorithm.prepare(params, context, feedback)
-    algorithm.runPrepared(params, context, feedback)
-    try:
-        assert handleAlgorithmResults(algorithm, context, feedback, parameters=params)
-        ticked = {node.name(): node.itemVisibilityChecked()
-                  for node in project.layerTreeRoot().findLayers()}
-        assert ticked == {"fusa – road centre lines": True, "fusa – road polygons": True,
-                          "fusa – junctions": True, "fusa – service ways": True,
-                          "fusa – bridged gaps (QA)": False,
-                          "fusa – junction connections (QA)": False,
-                          "fusa – rejected parts (QA)": False}
-        lines = project.mapLayersByName("fusa – road centre lines")[0]
-        assert lines.featureCount() > 20
-        assert lines.renderer().symbol().color().name() == "#e31a1c"  # styles/*.qml
-    finally:
-        project.clear()
+    ticked = run_and_load(algorithm, {"INPUT": str(lidar_dir / "fusa.laz"),
+                                      "OUTPUT": str(tmp_path / "roads.gpkg")})
+    assert ticked == FUSA_LAYERS
+    lines = QgsProject.instance().mapLayersByName("fusa – road centre lines")[0]
+    assert lines.featureCount() > 20
+    assert lines.renderer().symbol().color().name() == "#e31a1c"  # styles/*.qml
+
+
+def test_the_loaders_network_layers_are_the_cores(qgis_app):
+    """processing_provider.loading cannot import gisroads (external mode): its names are
+    gisroads.geo's."""
+    from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS, SERVICE_CENTRELINES
+    from processing_provider.loading import NETWORK_LAYERS
+
+    assert NETWORK_LAYERS == (CENTRELINES, POLYGONS, JUNCTIONS, SERVICE_CENTRELINES)

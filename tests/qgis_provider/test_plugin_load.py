@@ -205,6 +205,23 @@ def test_external_mode_runs_the_lidar_pipeline_through_gisroads(external_qgis_pr
     assert "Traceback" not in bad.stdout + bad.stderr
 
 
+def test_external_mode_loads_the_layers_as_in_process(run_and_load, lidar_dir, tmp_path):
+    """The external command's GeoPackage is added to the project as the in-process run's
+    is: named after the input, styled from the file, QA layers unticked."""
+    from qgis.core import QgsProject
+
+    from processing_provider.external import ExternalLidarRoadNetwork
+    from tests.qgis_provider.test_in_process import FUSA_LAYERS
+
+    algorithm = ExternalLidarRoadNetwork(external_gisroads())
+    algorithm.initAlgorithm()
+    ticked = run_and_load(algorithm, {"INPUT": str(lidar_dir / "fusa.laz"),
+                                      "OUTPUT": str(tmp_path / "roads.gpkg")})
+    assert ticked == FUSA_LAYERS
+    lines = QgsProject.instance().mapLayersByName("fusa – road centre lines")[0]
+    assert lines.renderer().symbol().color().name() == "#e31a1c"
+
+
 def test_external_mode_cancel_stops_the_command_and_leaves_nothing(qgis_app, tmp_path):
     from qgis.core import QgsProcessingContext, QgsProcessingException, QgsProcessingFeedback
 

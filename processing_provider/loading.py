@@ -1,0 +1,87 @@
+"""Output GeoPackages added to the QGIS project when an algorithm ends, styled and named.
+
+Standard library and qgis only: the external-tool mode (:mod:`.external`) loads its outputs
+with it where gisroads cannot be imported. The styles are those gisroads stores in every
+GeoPackage it writes (its ``layer_styles`` table, from ``styles/<layer>.qml``): Processing
+loads layers without their stored default style, so a post-processor loads it.
+"""
+from __future__ import annotations
+
+from qgis.core import (QgsProcessingContext, QgsProcessingLayerPostProcessorInterface,
+                       QgsVectorLayer)
+
+#: The road network's own layers (gisroads.geo's CENTRELINES, POLYGONS, JUNCTIONS and
+#: SERVICE_CENTRELINES): ticked when a run loads them; the others it loads beside them
+#: (rectangles, bridged gaps, rejected parts...) are QA layers, loaded unticked.
+NETWORK_LAYERS = ("road_centrelines", "road_polygons", "junctions", "service_centrelines")
+
+#: What the layer tree calls a layer (its table name otherwise, underscores as spaces).
+LAYER_TITLES = {"road_centrelines": "road centre lines", "road_polygons": "road polygons",
+                "service_centrelines": "service ways", "gap_edges": "bridged gaps (QA)",
+                "junction_connections": "junction connections (QA)",
+                "rejected": "rejected parts (QA)", "rectangles": "selected rectangles (QA)",
+                "hypotheses": "rectangle hypotheses (QA)", "segments": "segments (QA)",
+                "road_parts": "road parts (QA)"}
+
+
+class ApplyStyle(QgsProcessingLayerPostProcessorInterface):
+    """Styles an output layer when QGIS loads it (with a QML file, or the default style
+    stored with the layer) and leaves it unticked in the layer tree unless ``visible``."""
+
+    def __init__(self, qml_path: str | None = None, *, visible: bool = True):
+        super().__init__()
+        self.qml_path = qml_path
+        self.visible = visible
+
+    def postProcessLayer(self, layer, context, feedback):  # noqa: N802
+        if isinstance(layer, QgsVectorLayer):
+            if self.qml_path is None:
+                layer.loadDefaultStyle()
+            else:
+                layer.loadNamedStyle(self.qml_path)
+            layer.triggerRepaint()
+        project = context.project()
+        node = project.layerTreeRoot().findLayer(layer.id()) if project is not None else None
+        if node is not None:
+            node.setItemVisibilityChecked(self.visible)
+
+
+_POST_PROCESSORS = []  # QGIS does not own them: keep them alive until the run ends
+
+
+def on_load(context, dest_id: str, processor: ApplyStyle) -> None:
+    """Run ``processor`` on the output ``dest_id`` when QGIS loads it."""
+    if context.willLoadLayerOnCompletion(dest_id):
+        _POST_PROCESSORS.append(processor)
+        context.layerToLoadOnCompletionDetails(dest_id).setPostProcessor(processor)
+
+
+def geopackage_layers(path: str) -> list[str]:
+    """The layers with geometry of a GeoPackage, in its order (not its ``layer_styles``)."""
+    from osgeo import ogr
+
+    source = ogr.Open(str(path))
+    if source is None:
+        return []
+    layers = [source.GetLayerByIndex(i) for i in range(source.GetLayerCount())]
+    return [layer.GetName() for layer in layers if layer.GetGeomType() != ogr.wkbNone]
+
+
+def load_geopackage_on_completion(context, path: str, layer_names=None, *, group: str = "",
+                                  title: str | None = None) -> None:
+    """Add layers of a GeoPackage (by default all of them) to the project when the
+    algorithm ends, each with the style stored in the file.
+
+    Named "``title`` – road centre lines" (:data:`LAYER_TITLES`) with a ``title`` (the
+    input's name), else "``group`` layer". When the network's own layers
+    (:data:`NETWORK_LAYERS`) are among them, the other layers are QA layers: loaded, but
+    unticked."""
+    names = geopackage_layers(path) if layer_names is None else list(layer_names)
+    network = any(name in NETWORK_LAYERS for name in names)
+    for name in names:
+        uri = f"{path}|layername={name}"
+        shown = (f"{title} – {LAYER_TITLES.get(name, name.replace('_', ' '))}" if title
+                 else f"{group} {name}".strip())
+        context.addLayerToLoadOnCompletion(
+            uri, QgsProcessingContext.LayerDetails(shown, context.project(), name))
+        on_load(context, uri, ApplyStyle(visible=not network or name in NETWORK_LAYERS))
