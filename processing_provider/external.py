@@ -7,9 +7,9 @@ environment variable, the ``gisroads/executable`` QGIS setting, or on PATH. It r
 progress as JSON lines on stderr (``--progress-json``) and its result as JSON on stdout
 (``--json``); a cancel terminates it (SIGTERM: it removes what it was writing).
 
-Standard library and qgis only: this module must import where gisroads cannot. So far one
-algorithm runs this way, the whole LiDAR pipeline (its layers loaded as in-process:
-:mod:`.loading`); the others need the packages in QGIS.
+Standard library and qgis only: this module must import where gisroads cannot. So far the
+two whole pipelines run this way, LiDAR and imagery (their layers loaded as in-process:
+:mod:`.loading`); the other algorithms need the packages in QGIS.
 """
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ from pathlib import Path
 from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingOutputNumber, QgsProcessingParameterEnum,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
+                       QgsProcessingParameterRasterLayer,
                        QgsProcessingProvider, QgsSettings)
 
 from .algorithms.base import workers_parameter
@@ -88,56 +89,52 @@ def run_external(executable: str, arguments: list[str], feedback) -> dict:
     return json.loads(stdout)
 
 
-class ExternalLidarRoadNetwork(QgsProcessingAlgorithm):
-    """LiDAR road network (Zhu & Mordohai) through the external ``gisroads lidar``: the
-    same id, outputs and defaults as the in-process algorithm, fewer parameters."""
+class _ExternalRoadNetwork(QgsProcessingAlgorithm):
+    """A whole pipeline through the external ``gisroads``: the same id, outputs and defaults
+    as the in-process algorithm, fewer parameters; its GeoPackage is loaded as in-process
+    (:mod:`.loading`)."""
 
-    CUES = ["intensity", "evidence"]
+    NAME = DISPLAY_NAME = GROUP = SUBCOMMAND = HELP = ""
 
     def __init__(self, executable: str):
         super().__init__()
         self.executable = executable
 
     def name(self):
-        return "lidarroadnetwork"
+        return self.NAME
 
     def displayName(self):  # noqa: N802
-        return "LiDAR road network (Zhu & Mordohai)"
+        return self.DISPLAY_NAME
 
     def group(self):
-        return "LiDAR"
+        return self.GROUP
 
     def groupId(self):  # noqa: N802
-        return "lidar"
+        return self.GROUP.lower()
 
     def shortHelpString(self):  # noqa: N802
-        return ("<p>Extracts the road network of an airborne LiDAR point cloud (LAS/LAZ) "
-                "(by default every cue the cloud carries; Zhu &amp; Mordohai's intensity cue "
-                "alone on request), by running the external gisroads command "
-                f"(<code>{self.executable} lidar</code>): QGIS's Python lacks the packages "
-                "gisroads needs, so this runs in that command's own environment. Output: a "
-                "GeoPackage with road_centrelines, road_polygons, junctions and QA layers, "
-                "in the cloud's CRS.</p>")
+        return (f"<p>{self.HELP}, by running the external gisroads command "
+                f"(<code>{self.executable} {self.SUBCOMMAND}</code>): QGIS's Python lacks the "
+                "packages gisroads needs, so this runs in that command's own environment. "
+                "Output: a GeoPackage with road_centrelines, road_polygons, junctions and QA "
+                "layers, in the input's CRS, added to the project named after the input.</p>")
 
     def createInstance(self):  # noqa: N802
         return type(self)(self.executable)
 
+    def parameters(self) -> list:
+        """``(parameter, help text)`` of the algorithm, OUTPUT excepted."""
+        raise NotImplementedError
+
+    def arguments(self, parameters, context) -> tuple[str, list[str]]:
+        """The input's path and the subcommand's other arguments."""
+        raise NotImplementedError
+
     def initAlgorithm(self, config=None):  # noqa: N802
-        params = [
-            (QgsProcessingParameterFile("INPUT", "Point cloud (LAS/LAZ)",
-                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)"),
-             "airborne LiDAR (the intensity cue needs intensity); feet are converted to "
-             "metres"),
-            (QgsProcessingParameterEnum("CUE", "Road cue", self.CUES,
-                                        defaultValue=self.CUES.index("evidence")),
-             "evidence (default): the road likelihood of every cue the cloud carries (the "
-             "paper's intensity among them), through the network stage; intensity: the "
-             "paper's rectangles on the ground intensity alone"),
-            (QgsProcessingParameterFileDestination("OUTPUT", "Road network",
-                                                   "GeoPackage (*.gpkg)"),
-             "GeoPackage receiving every layer, in the cloud's CRS"),
-            (workers_parameter(str, "tiles"), None),
-        ]
+        params = [*self.parameters(),
+                  (QgsProcessingParameterFileDestination("OUTPUT", "Road network",
+                                                         "GeoPackage (*.gpkg)"),
+                   "GeoPackage receiving every layer, in the input's CRS")]
         for parameter, text in params:
             if text is not None:
                 parameter.setHelp(text)
@@ -148,16 +145,77 @@ class ExternalLidarRoadNetwork(QgsProcessingAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
-        cue = self.CUES[self.parameterAsEnum(parameters, "CUE", context)]
-        cloud = self.parameterAsFile(parameters, "INPUT", context)
-        result = run_external(self.executable, [
-            "lidar", cloud, "-o", out, "--cue", cue,
-            "--workers", str(self.parameterAsInt(parameters, "WORKERS", context))], feedback)
+        source, arguments = self.arguments(parameters, context)
+        result = run_external(self.executable,
+                              [self.SUBCOMMAND, source, "-o", out, *arguments], feedback)
         feedback.pushInfo(f"{result['roads']} roads, {result['length_m']:.0f} m, "
                           f"{result['junctions']} junctions")
-        load_geopackage_on_completion(context, out, title=Path(cloud).stem)
+        load_geopackage_on_completion(context, out, title=self.title(parameters, context))
         return {"OUTPUT": out, "ROADS": result["roads"], "LENGTH_M": result["length_m"],
                 "JUNCTIONS": result["junctions"]}
+
+    def title(self, parameters, context) -> str:
+        """What the loaded layers are named after: the input's name."""
+        return Path(self.arguments(parameters, context)[0]).stem
+
+
+class ExternalLidarRoadNetwork(_ExternalRoadNetwork):
+    """LiDAR road network through ``gisroads lidar``."""
+
+    NAME, DISPLAY_NAME, GROUP = ("lidarroadnetwork", "LiDAR road network (Zhu & Mordohai)",
+                                 "LiDAR")
+    SUBCOMMAND = "lidar"
+    HELP = ("Extracts the road network of an airborne LiDAR point cloud (LAS/LAZ) (by default "
+            "every cue the cloud carries; Zhu &amp; Mordohai's intensity cue alone on "
+            "request)")
+    CUES = ["intensity", "evidence"]
+
+    def parameters(self):
+        return [
+            (QgsProcessingParameterFile("INPUT", "Point cloud (LAS/LAZ)",
+                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)"),
+             "airborne LiDAR (the intensity cue needs intensity); feet are converted to "
+             "metres"),
+            (QgsProcessingParameterEnum("CUE", "Road cue", self.CUES,
+                                        defaultValue=self.CUES.index("evidence")),
+             "evidence (default): the road likelihood of every cue the cloud carries (the "
+             "paper's intensity among them), through the network stage; intensity: the "
+             "paper's rectangles on the ground intensity alone"),
+            (workers_parameter(str, "tiles"), None),
+        ]
+
+    def arguments(self, parameters, context):
+        return (self.parameterAsFile(parameters, "INPUT", context),
+                ["--cue", self.CUES[self.parameterAsEnum(parameters, "CUE", context)],
+                 "--workers", str(self.parameterAsInt(parameters, "WORKERS", context))])
+
+
+class ExternalImageryRoadNetwork(_ExternalRoadNetwork):
+    """Imagery road network through ``gisroads image``: the bundled road network's
+    probability through the network stage, the default of the in-process algorithm."""
+
+    NAME, DISPLAY_NAME, GROUP = ("imageryroadnetwork",
+                                 "Imagery road network (Grote & Rottensteiner)", "Imagery")
+    SUBCOMMAND = "image"
+    HELP = ("Extracts the road network of an aerial image (GeoTIFF: RGB, CIR, panchromatic; "
+            "a geographic image is warped to its UTM zone) with the bundled convolutional "
+            "road model and the network stage")
+
+    def parameters(self):
+        return [
+            (QgsProcessingParameterRasterLayer("INPUT", "Aerial image"),
+             "a raster layer of the project or a file; the layer's file is what is read"),
+            (QgsProcessingParameterRasterLayer("DSM", "Digital surface model", optional=True),
+             "optional: a DSM in metres on the image's area"),
+        ]
+
+    def arguments(self, parameters, context):
+        image = self.parameterAsRasterLayer(parameters, "INPUT", context)
+        dsm = self.parameterAsRasterLayer(parameters, "DSM", context)
+        return image.source(), (["--dsm", dsm.source()] if dsm is not None else [])
+
+    def title(self, parameters, context):
+        return self.parameterAsRasterLayer(parameters, "INPUT", context).name()
 
 
 class ExternalProvider(QgsProcessingProvider):
@@ -178,4 +236,5 @@ class ExternalProvider(QgsProcessingProvider):
         return f"gisroads (external: {self.executable})"
 
     def loadAlgorithms(self):  # noqa: N802
-        self.addAlgorithm(ExternalLidarRoadNetwork(self.executable))
+        for algorithm in (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork):
+            self.addAlgorithm(algorithm(self.executable))
