@@ -91,14 +91,18 @@ def image_grid(bounds, cell_m: float) -> tuple[Affine, tuple[int, int]]:
     return Affine(cell_m, 0.0, xmin, 0.0, -cell_m, ymax), (rows, cols)
 
 
+CELL_M = 0.5
+"""The intensity image cell, metres (Zhu & Mordohai, section 4.2)."""
+
+
 def auto_cell_m(point_count: int, area_m2: float) -> float:
     """The intensity image cell for a cloud: the paper's 0.5 m, or about one mean point
     spacing (1 / sqrt(density)) for sparser clouds, rounded up to 5 cm."""
     spacing = 1.0 / np.sqrt(max(point_count, 1) / max(area_m2, 1e-9))
-    return float(max(0.5, np.ceil(spacing * 20.0) / 20.0))
+    return float(max(CELL_M, np.ceil(spacing * 20.0) / 20.0))
 
 
-def intensity_images(xyz, intensity, level, *, cell_m: float = 0.5, bounds=None,
+def intensity_images(xyz, intensity, level, *, cell_m: float = CELL_M, bounds=None,
                      crs: CRS | None = None, fill_radius_m: float | None = None,
                      single_return=None,
                      percentiles: tuple[float, float] = (1.0, 99.0)) -> IntensityImages:

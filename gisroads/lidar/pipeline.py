@@ -40,7 +40,7 @@ from ..parallel import NOT_KEPT, for_each_result, keep_result, kept_result, shar
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.rasters import raster_to_network
-from ..tiling.tiles import Tile, stitch_tiles
+from ..tiling.tiles import OVERLAP_M, TILE_M, Tile, stitch_tiles
 from ..tiling.tilestore import (TileStore, code_fingerprint, digest, inputs_crs,
                                 las_inputs, open_store)
 from .evidence import (CAR_PARK_FLANK_SHARE, SHORE_FLANK_SHARE, dropout_cells, road_evidence,
@@ -48,7 +48,7 @@ from .evidence import (CAR_PARK_FLANK_SHARE, SHORE_FLANK_SHARE, dropout_cells, r
 from .ground import GroundPlanes, ground_planes
 from .hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, likelihood_maps,
                          road_hypotheses)
-from .intensity import IntensityImages, auto_cell_m, image_grid, intensity_images
+from .intensity import CELL_M, IntensityImages, auto_cell_m, image_grid, intensity_images
 from .mincover import greedy_min_cover
 from .roads import lines_to_network, rectangle_lines
 from .tagging import level_heights
@@ -63,6 +63,8 @@ EVIDENCE_THRESHOLD = 0.8
 #: (hysteresis, as Canny's edge thresholds), so a road stays whole through a stretch its
 #: cues doubt and weak patches alone stay out (``bench/lidar_evidence_network.py``).
 EVIDENCE_NETWORK_OPTIONS = {"part_options": {"low_threshold": 0.6}}
+N_SEGMENTS = 150
+"""NCut regions per tile image (Zhu & Mordohai, section 4.2: 100-200)."""
 
 
 class EvidenceMosaic(NamedTuple):
@@ -125,7 +127,7 @@ def ground_and_intensity(cloud: PointCloud, planes: GroundPlanes, *, bounds, cel
     return images, heights
 
 
-def edges_and_segments(image: np.ndarray, *, n_segments: int = 150
+def edges_and_segments(image: np.ndarray, *, n_segments: int = N_SEGMENTS
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stage 3 on one level's intensity image (NaN = no data): local-energy edge magnitude
     and orientation, and the NCut over-segmentation (labels, -1 = no data)."""
@@ -136,9 +138,9 @@ def edges_and_segments(image: np.ndarray, *, n_segments: int = 150
     return magnitude, orientation, labels
 
 
-def extract_tile(cloud: PointCloud, tile: Tile, *, cell_m: float = 0.5,
+def extract_tile(cloud: PointCloud, tile: Tile, *, cell_m: float = CELL_M,
                  widths_m=DEFAULT_WIDTHS_M, lengths_m=DEFAULT_LENGTHS_M,
-                 n_segments: int = 150, t_planar: float = 0.01, t_vert: float = 0.98,
+                 n_segments: int = N_SEGMENTS, t_planar: float = 0.01, t_vert: float = 0.98,
                  progress: Progress = None) -> TileRoads:
     """Roads of one tile (Algorithm 1, steps 1-6) from the points inside its bounds.
 
@@ -357,7 +359,7 @@ def _core_only(tile: Tile, result: TileRoads) -> TileRoads:
                    heights=_core_raster(result.heights, tile))
 
 
-def evidence_raster(path, *, tile_m: float = 300.0, overlap_m: float = 100.0,
+def evidence_raster(path, *, tile_m: float = TILE_M, overlap_m: float = OVERLAP_M,
                     cell_m: float | None = None, min_points: int = 1000,
                     workers: int = 1, scheduler: str | None = None, work_dir=None,
                     progress: Progress = None, _run: dict | None = None
@@ -487,10 +489,10 @@ def service_lines(lines: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
     }, geometry=frame.geometry.values, crs=lines.crs)
 
 
-def extract_roads(path, *, cue: str = "evidence", tile_m: float = 300.0,
-                  overlap_m: float = 100.0, cell_m: float | None = None,
+def extract_roads(path, *, cue: str = "evidence", tile_m: float = TILE_M,
+                  overlap_m: float = OVERLAP_M, cell_m: float | None = None,
                   widths_m=DEFAULT_WIDTHS_M, lengths_m=DEFAULT_LENGTHS_M,
-                  n_segments: int = 150, t_planar: float = 0.01, t_vert: float = 0.98,
+                  n_segments: int = N_SEGMENTS, t_planar: float = 0.01, t_vert: float = 0.98,
                   threshold: float = EVIDENCE_THRESHOLD, network_options: dict | None = None,
                   min_points: int = 1000, workers: int = 1, scheduler: str | None = None,
                   work_dir=None, tile_maps: bool = True, lazy: bool = False,

@@ -17,6 +17,11 @@ import shapely
 
 from ..errors import GisroadsError
 
+TILE_M = 300.0
+"""Side of a tile, metres (Zhu & Mordohai, section 3)."""
+OVERLAP_M = 100.0
+"""Overlap of a tile with each neighbour, metres (Zhu & Mordohai, section 3)."""
+
 
 @dataclass(frozen=True)
 class Tile:
@@ -42,7 +47,7 @@ def _counts(lo: float, hi: float, tile_m: float, stride_m: float) -> int:
     return max(1, int(np.ceil((hi - lo - tile_m) / stride_m)) + 1)
 
 
-def tile_grid(extent, *, tile_m: float = 300.0, overlap_m: float = 100.0,
+def tile_grid(extent, *, tile_m: float = TILE_M, overlap_m: float = OVERLAP_M,
               points_xy=None) -> list[Tile]:
     """Tiles of ``tile_m`` overlapping their neighbours by ``overlap_m`` over an extent.
 

@@ -43,7 +43,7 @@ from pyproj import CRS
 from ..errors import GisroadsError
 from ..io.las import DEFAULT_CHUNK, LasError, PointCloud, cloud_crs, iter_las_chunks, las_info
 from ..progress import Progress, report
-from .tiles import Tile, tile_grid
+from .tiles import OVERLAP_M, TILE_M, Tile, tile_grid
 
 #: One stored point.
 RECORD = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<u2"),
@@ -281,7 +281,7 @@ def _load(folder: Path, paths: list[Path], crs) -> TileStore:
                      manifest["key"])
 
 
-def open_store(source, work_dir=None, *, tile_m: float = 300.0, overlap_m: float = 100.0,
+def open_store(source, work_dir=None, *, tile_m: float = TILE_M, overlap_m: float = OVERLAP_M,
                chunk_size: int = DEFAULT_CHUNK, workers: int = 1, scheduler: str | None = None,
                progress: Progress = None) -> TileStore:
     """The tile store of ``source`` in ``work_dir``: reused when a complete store of the
