@@ -37,7 +37,7 @@ test-core-qgis: setup
 test-qgis: setup plugin
 	GISROADS_REQUIRE_QGIS=1 $(QVENV)/python -m pytest -q -p no:cacheprovider tests/qgis_provider
 
-plugin: dist/gisroads_qgis.zip
+plugin: setup-core dist/gisroads_qgis.zip
 
 dist/gisroads_qgis.zip: scripts/build_plugin.sh metadata.txt $(shell git ls-files -co --exclude-standard gisroads processing_provider styles 2>/dev/null)
 	@scripts/build_plugin.sh

@@ -10,18 +10,17 @@ if os.path.isdir(os.path.join(_PLUGIN_DIR, "gisroads")) and _PLUGIN_DIR not in s
 
 
 def classFactory(iface):  # noqa: N802 (QGIS's name)
-    """The plugin; when the algorithms' Python packages are missing or do not import, a
-    stand-in that says so in one message (no traceback, no provider)."""
+    """The plugin: in-process when QGIS's Python has the algorithms' packages; in
+    external-tool mode when it lacks them; a stand-in that says why in one message (no
+    traceback, no provider) when they are there but do not import."""
     from .dependencies import load_error_message, missing_message, missing_requirements
     from .plugin import GisroadsPlugin, UnavailablePlugin
     missing = missing_requirements()
     if missing:
         from .external import find_executable
         from .plugin import ExternalPlugin
-        executable = find_executable()
-        if executable is not None:  # external-tool mode
-            return ExternalPlugin(iface, missing_message(missing), executable)
-        return UnavailablePlugin(iface, missing_message(missing))
+        # external-tool mode; without a gisroads command, Set up gisroads makes one
+        return ExternalPlugin(iface, missing_message(missing), find_executable())
     try:
         from . import provider  # noqa: F401: imports gisroads and every dependency
     except Exception as error:  # noqa: BLE001: any import failure is reported, not raised

@@ -76,21 +76,28 @@ class Unmet:
 
 
 def missing_message(missing: list[str]) -> Unmet:
-    """What the plugin says when requirements are unmet: what, and how to fix it."""
+    """What the plugin says when requirements are unmet and no gisroads command is found:
+    what, and how to fix it (first: *Set up gisroads*, :mod:`.setup_gisroads`)."""
+    from .environment import SetupError, interpreter
+
+    try:
+        python = f"{interpreter()} {sys.version.split()[0]}"
+    except SetupError:
+        python = f"{sys.executable} {sys.version.split()[0]}"
     names = " ".join(f"'{entry.split(' ')[0]}'" for entry in missing)
     return Unmet(
-        f"the Processing algorithms are not loaded: QGIS's Python lacks "
+        f"the algorithms need gisroads' own Python environment: QGIS's Python lacks "
         f"{', '.join(missing)}.",
-        f"QGIS's Python is {sys.executable or 'python3'} {sys.version.split()[0]}. "
-        "Start QGIS from a Python environment that has them: "
-        "python3 -m venv --system-site-packages ~/gisroads-venv && "
+        "Run Set up gisroads (Processing toolbox: gisroads, Set-up; or qgis_process run "
+        "gisroads:setupgisroads): it makes that environment once, in the QGIS profile, with "
+        f"QGIS's Python ({python}) and pip, and every algorithm then runs through it. Or "
+        "name an existing gisroads command in the QGIS setting gisroads/executable or the "
+        "GISROADS_EXECUTABLE environment variable. Or, to run the algorithms inside QGIS, "
+        "start QGIS from a Python environment that has the packages: "
+        f"{python.split()[0]} -m venv --system-site-packages ~/gisroads-venv && "
         f"~/gisroads-venv/bin/pip install --no-binary shapely 'numpy<2' {names} "
         "(shapely built against the system GEOS: its PyPI wheel crashes inside QGIS), "
-        "then source ~/gisroads-venv/bin/activate && qgis. From a gisroads checkout: "
-        "scripts/setup.sh qgis builds .venv-qgis for that. Or let the algorithms that can "
-        "run a gisroads command installed elsewhere (pipx install gisroads, a venv): put "
-        "it on PATH, or name it in the GISROADS_EXECUTABLE environment variable or the "
-        "QGIS setting gisroads/executable.")
+        "then source ~/gisroads-venv/bin/activate && qgis.")
 
 
 def load_error_message(error: BaseException) -> Unmet:

@@ -2,10 +2,12 @@
 
 For a QGIS whose Python lacks gisroads' packages (Debian 12's own: shapely 1.8), as QGIS's
 GRASS and SAGA providers run their tools: the executable is the ``gisroads`` command of
-an environment that has them (a venv, pipx), found in the ``GISROADS_EXECUTABLE``
-environment variable, the ``gisroads/executable`` QGIS setting, or on PATH. It reports
-progress as JSON lines on stderr (``--progress-json``) and its result as JSON on stdout
-(``--json``); a cancel terminates it (SIGTERM: it removes what it was writing).
+an environment that has them, found in this order whatever PATH holds: the
+``GISROADS_EXECUTABLE`` environment variable, the ``gisroads/executable`` QGIS setting,
+the private environment that *Set up gisroads* makes in the QGIS profile
+(:mod:`.setup_gisroads`), then PATH. It reports progress as JSON lines on stderr
+(``--progress-json``) and its result as JSON on stdout (``--json``); a cancel terminates it
+(SIGTERM: it removes what it was writing).
 
 Standard library and qgis only: this module must import where gisroads cannot. So far the
 two whole pipelines run this way, LiDAR and imagery (their layers loaded as in-process:
@@ -26,15 +28,17 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingProvider, QgsSettings)
 
 from .algorithms.base import workers_parameter
+from .environment import ready_executable
 from .loading import load_geopackage_on_completion
+from .setup_gisroads import SetUpGisroads, private_environment_folder
 
 SETTING = "gisroads/executable"
 
 
 def find_executable() -> str | None:
-    """The external ``gisroads`` (see the module's doc), None when none runs."""
+    """The external ``gisroads`` (see the module's doc for the order), None when none runs."""
     candidates = [os.environ.get("GISROADS_EXECUTABLE"), QgsSettings().value(SETTING, ""),
-                  shutil.which("gisroads")]
+                  ready_executable(private_environment_folder()), shutil.which("gisroads")]
     for candidate in filter(None, candidates):
         try:
             done = subprocess.run([candidate, "--version"], capture_output=True, text=True,
@@ -220,11 +224,13 @@ class ExternalImageryRoadNetwork(_ExternalRoadNetwork):
 
 class ExternalProvider(QgsProcessingProvider):
     """The gisroads provider in external-tool mode (same id: models and scripts that name
-    ``gisroads:lidarroadnetwork`` work in both modes)."""
+    ``gisroads:lidarroadnetwork`` work in both modes). Without an executable it holds *Set
+    up gisroads* alone, and the algorithms once that has made one."""
 
-    def __init__(self, executable: str):
+    def __init__(self, executable: str | None, on_ready=None):
         super().__init__()
         self.executable = executable
+        self.on_ready = on_ready
 
     def id(self):
         return "gisroads"
@@ -233,8 +239,17 @@ class ExternalProvider(QgsProcessingProvider):
         return "gisroads"
 
     def longName(self):  # noqa: N802
-        return f"gisroads (external: {self.executable})"
+        return f"gisroads (external: {self.executable or 'not set up yet'})"
 
     def loadAlgorithms(self):  # noqa: N802
-        for algorithm in (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork):
-            self.addAlgorithm(algorithm(self.executable))
+        self.addAlgorithm(SetUpGisroads(on_ready=self.use))
+        if self.executable is not None:
+            for algorithm in (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork):
+                self.addAlgorithm(algorithm(self.executable))
+
+    def use(self, executable: str):
+        """Run the algorithms through ``executable`` from now on."""
+        self.executable = executable
+        self.refreshAlgorithms()
+        if self.on_ready is not None:
+            self.on_ready(executable)

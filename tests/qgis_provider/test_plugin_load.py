@@ -39,7 +39,9 @@ def test_without_its_packages_the_plugin_says_what_is_missing_once(plain_qgis_pr
     for result in (plain_qgis_process.enabled, listed):
         assert "Traceback" not in result.stdout + result.stderr
         assert "Error" not in result.stderr
-    assert not re.search(r"^\s*gisroads:", listed.stdout, flags=re.M)  # no algorithm
+    # the set-up alone (tests/qgis_provider/test_setup_gisroads.py)
+    assert re.findall(r"^\s*(gisroads:\S+)", listed.stdout, flags=re.M) == [
+        "gisroads:setupgisroads"]
     messages = [line for line in listed.stderr.splitlines() if line.startswith("gisroads:")]
     assert len(messages) == 1, listed.stderr
     message = messages[0]
@@ -81,7 +83,9 @@ def test_missing_and_old_packages_are_named():
         f"pytest>=999.1 (found {pytest.__version__})"]
     unmet = missing_message(["shapely>=2.0 (found 1.8.5)", "laspy>=2.4 (missing)"])
     message = str(unmet)
-    assert message.startswith("gisroads: the Processing algorithms are not loaded: ")
+    assert message.startswith("gisroads: the algorithms need gisroads' own Python "
+                              "environment: ")
+    assert "Run Set up gisroads" in unmet.fix and "pipx" not in message
     assert "\n" not in message and sys.version.split()[0] in unmet.fix
     assert "shapely>=2.0 (found 1.8.5), laspy>=2.4 (missing)." in unmet.what
     assert "'shapely>=2.0' 'laspy>=2.4'" in unmet.fix
@@ -109,7 +113,7 @@ def test_the_stand_in_plugin_shows_one_message_bar_item(qgis_app):
             return self.bar
 
     iface = Iface()
-    unmet = missing_message(["shapely>=2.0 (found 1.8.5)"])
+    unmet = load_error_message(ImportError("numpy.core.multiarray failed to import"))
     plugin = UnavailablePlugin(iface, unmet)
     plugin.initGui()
     plugin.initProcessing()
@@ -118,17 +122,51 @@ def test_the_stand_in_plugin_shows_one_message_bar_item(qgis_app):
     assert iface.bar.pushed == [("gisroads", unmet.what, unmet.fix, Qgis.Critical, 0)]
 
 
+def test_without_a_gisroads_command_the_bar_offers_the_set_up(qgis_app, qgis_iface):
+    from qgis.core import QgsApplication
+    from qgis.PyQt.QtWidgets import QPushButton
+
+    from processing_provider.plugin import ExternalPlugin
+
+    unmet = missing_message(["shapely>=2.0 (found 1.8.5)"])
+    plugin = ExternalPlugin(qgis_iface, unmet, None)
+    plugin.initGui()
+    try:
+        registry = QgsApplication.processingRegistry()
+        assert [a.id() for a in plugin.provider.algorithms()] == ["gisroads:setupgisroads"]
+        (item,) = [i for i in qgis_iface.messageBar().items() if i.title() == "gisroads"]
+        assert item.text() == unmet.what
+        (button,) = item.findChildren(QPushButton, options=Qt_children())
+        assert button.text() == "Set up gisroads…" and button.toolTip() == unmet.fix
+        # what the set-up does once it has made the environment
+        plugin.provider.use("/opt/gisroads-env/bin/gisroads")
+        assert sorted(a.id() for a in plugin.provider.algorithms()) == [
+            "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
+            "gisroads:setupgisroads"]
+        assert registry.algorithmById("gisroads:lidarroadnetwork").executable == (
+            "/opt/gisroads-env/bin/gisroads")
+        assert not [i for i in qgis_iface.messageBar().items() if i.title() == "gisroads"]
+    finally:
+        plugin.unload()
+
+
+def Qt_children():  # noqa: N802
+    from qgis.PyQt.QtCore import Qt
+    return Qt.FindChildrenRecursively
+
+
 DESKTOP_PROBE = r"""
 import json
 from qgis.core import QgsApplication
 from qgis.PyQt.QtCore import QTimer
-from qgis.PyQt.QtWidgets import QApplication
+from qgis.PyQt.QtWidgets import QApplication, QPushButton
 from qgis.utils import iface
 
 def report():
     dialogs = [w.windowTitle() for w in QApplication.topLevelWidgets()
                if w.isVisible() and w is not iface.mainWindow()]
-    items = [[item.title(), item.text()] for item in iface.messageBar().items()]
+    items = [[item.title(), item.text(), [b.text() for b in item.findChildren(QPushButton)]]
+             for item in iface.messageBar().items()]
     providers = [p.id() for p in QgsApplication.processingRegistry().providers()]
     with open(OUT, "w") as f:
         json.dump({"dialogs": dialogs, "bar": items, "providers": providers}, f)
@@ -157,10 +195,11 @@ def test_the_desktop_starts_with_one_message_and_no_error_dialog(plain_qgis_proc
     assert "Traceback" not in started.stdout + started.stderr
     seen = json.loads(out.read_text())
     assert seen["dialogs"] == []  # no Python error dialog
-    assert "gisroads" not in seen["providers"]
-    ((title, text),) = [item for item in seen["bar"] if item[0] == "gisroads"]
-    assert text.startswith("the Processing algorithms are not loaded: QGIS's Python lacks "
-                           "shapely>=2.0 (found 1.")
+    assert "gisroads" in seen["providers"]  # Set up gisroads alone
+    ((title, text, buttons),) = [item for item in seen["bar"] if item[0] == "gisroads"]
+    assert text.startswith("the algorithms need gisroads' own Python environment: QGIS's "
+                           "Python lacks shapely>=2.0 (found 1.")
+    assert buttons == ["Set up gisroads…"]
 
 
 def external_gisroads() -> str:
@@ -186,7 +225,7 @@ def test_external_mode_runs_the_lidar_pipeline_through_gisroads(external_qgis_pr
     listed = external_qgis_process("list")
     assert "Traceback" not in listed.stdout + listed.stderr
     assert re.findall(r"^\s*(gisroads:\S+)", listed.stdout, flags=re.M) == [
-        "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork"]
+        "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork", "gisroads:setupgisroads"]
     out = tmp_path / "fusa.gpkg"
     done = external_qgis_process("--json", "run", "gisroads:lidarroadnetwork", "--",
                                  f"INPUT={lidar_dir / 'fusa.laz'}", f"OUTPUT={out}")
