@@ -27,9 +27,9 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingParameterRasterLayer,
                        QgsProcessingProvider, QgsSettings)
 
-from .algorithms.base import workers_parameter
+from .algorithms.base import background_output, workers_parameter
 from .environment import ready_executable
-from .loading import load_geopackage_on_completion
+from .loading import load_beneath_on_completion, load_geopackage_on_completion
 from .setup_gisroads import SetUpGisroads, private_environment_folder
 
 SETTING = "gisroads/executable"
@@ -154,9 +154,18 @@ class _ExternalRoadNetwork(QgsProcessingAlgorithm):
                               [self.SUBCOMMAND, source, "-o", out, *arguments], feedback)
         feedback.pushInfo(f"{result['roads']} roads, {result['length_m']:.0f} m, "
                           f"{result['junctions']} junctions")
-        load_geopackage_on_completion(context, out, title=self.title(parameters, context))
+        title = self.title(parameters, context)
+        load_geopackage_on_completion(context, out, title=title)
+        beneath = self.beneath(parameters, context, result)
+        if beneath is not None:
+            load_beneath_on_completion(context, *beneath, title=title)
         return {"OUTPUT": out, "ROADS": result["roads"], "LENGTH_M": result["length_m"],
-                "JUNCTIONS": result["junctions"]}
+                "JUNCTIONS": result["junctions"],
+                **({"BACKGROUND": result["background"]} if "background" in result else {})}
+
+    def beneath(self, parameters, context, result) -> tuple[str, str] | None:
+        """The raster to add beneath the roads and what it is, None for none."""
+        return None
 
     def title(self, parameters, context) -> str:
         """What the loaded layers are named after: the input's name."""
@@ -186,12 +195,20 @@ class ExternalLidarRoadNetwork(_ExternalRoadNetwork):
              "paper's intensity among them), through the network stage; intensity: the "
              "paper's rectangles on the ground intensity alone"),
             (workers_parameter(str, "tiles"), None),
+            (background_output(str), None),
         ]
 
     def arguments(self, parameters, context):
+        background = self.parameterAsFileOutput(parameters, "BACKGROUND", context)
         return (self.parameterAsFile(parameters, "INPUT", context),
                 ["--cue", self.CUES[self.parameterAsEnum(parameters, "CUE", context)],
-                 "--workers", str(self.parameterAsInt(parameters, "WORKERS", context))])
+                 "--workers", str(self.parameterAsInt(parameters, "WORKERS", context)),
+                 *(["--background", background] if background else [])])
+
+    def beneath(self, parameters, context, result):
+        if "background" not in result:
+            return None
+        return result["background"], result["background_kind"]
 
 
 class ExternalImageryRoadNetwork(_ExternalRoadNetwork):
@@ -220,6 +237,9 @@ class ExternalImageryRoadNetwork(_ExternalRoadNetwork):
 
     def title(self, parameters, context):
         return self.parameterAsRasterLayer(parameters, "INPUT", context).name()
+
+    def beneath(self, parameters, context, result):
+        return self.parameterAsRasterLayer(parameters, "INPUT", context).source(), "image"
 
 
 class ExternalProvider(QgsProcessingProvider):

@@ -46,10 +46,35 @@ class ApplyStyle(QgsProcessingLayerPostProcessorInterface):
             node.setItemVisibilityChecked(self.visible)
 
 
+class PlaceBeneath(QgsProcessingLayerPostProcessorInterface):
+    """Moves a raster loaded with a run's layers (its input image, a cloud's ground
+    intensity) beneath them: just below the lowest layer of its group whose name starts
+    with ``prefix`` (the run's layers are named after its input), above whatever was
+    there before. Layers loaded after it go on top of it anyway."""
+
+    def __init__(self, prefix: str):
+        super().__init__()
+        self.prefix = prefix
+
+    def postProcessLayer(self, layer, context, feedback):  # noqa: N802
+        project = context.project()
+        node = project.layerTreeRoot().findLayer(layer.id()) if project is not None else None
+        if node is None:
+            return
+        parent = node.parent()
+        run = [i for i, child in enumerate(parent.children())
+               if child.name().startswith(self.prefix)
+               and getattr(child, "layerId", lambda: None)() != layer.id()]
+        if not run:
+            return
+        parent.insertChildNode(max(run) + 1, node.clone())
+        parent.removeChildNode(node)
+
+
 _POST_PROCESSORS = []  # QGIS does not own them: keep them alive until the run ends
 
 
-def on_load(context, dest_id: str, processor: ApplyStyle) -> None:
+def on_load(context, dest_id: str, processor) -> None:
     """Run ``processor`` on the output ``dest_id`` when QGIS loads it."""
     if context.willLoadLayerOnCompletion(dest_id):
         _POST_PROCESSORS.append(processor)
@@ -85,3 +110,17 @@ def load_geopackage_on_completion(context, path: str, layer_names=None, *, group
         context.addLayerToLoadOnCompletion(
             uri, QgsProcessingContext.LayerDetails(shown, context.project(), name))
         on_load(context, uri, ApplyStyle(visible=not network or name in NETWORK_LAYERS))
+
+
+def load_beneath_on_completion(context, source: str, what: str, *, title: str) -> None:
+    """Add the raster ``source`` (``what`` it is: "image", "ground intensity") to the
+    project when the algorithm ends, named "``title`` – ``what``", beneath the layers named
+    after ``title`` (:class:`PlaceBeneath`); nothing when ``source`` is a layer of the
+    project already."""
+    project = context.project()
+    if project is None or any(layer.source() == source
+                              for layer in project.mapLayers().values()):
+        return
+    context.addLayerToLoadOnCompletion(
+        source, QgsProcessingContext.LayerDetails(f"{title} – {what}", project, what))
+    on_load(context, source, PlaceBeneath(f"{title} – "))

@@ -38,7 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
 _OUTPUTS = {"out": (".gpkg",), "qa": (".gpkg",), "changes": (".gpkg",),
             "tagged_las": (".las", ".laz"), "attractor": (".tif", ".tiff"),
             "quicklook": (".png",), "rasters": None, "work_dir": None,
-            "probability": (".tif", ".tiff")}
+            "probability": (".tif", ".tiff"), "background": (".tif", ".tiff")}
 _FOLDER_OUT = {"synth", "demo"}
 
 

@@ -27,6 +27,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--rasters", type=Path,
                    help="also write intensity, likelihood and ground-height GeoTIFFs here "
                         "(with --cue evidence: road_evidence.tif)")
+    p.add_argument("--background", type=Path,
+                   help="also write a GeoTIFF to show beneath the roads: the ground intensity "
+                        "image where the cloud has intensity, else the road evidence")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
     add_database_options(p)
 
@@ -74,7 +77,8 @@ def run(args) -> int:
                        n_segments=args.segments, threshold=args.threshold,
                        workers=args.workers or default_workers(), scheduler=args.scheduler,
                        work_dir=args.work_dir, tagged_las=args.tagged_las,
-                       rasters_dir=args.rasters, quicklook=args.quicklook,
+                       rasters_dir=args.rasters, background=args.background,
+                       quicklook=args.quicklook,
                        progress=ProgressBar(not args.json))
     print_result(then_compare(args, result), args.json)
     return 0

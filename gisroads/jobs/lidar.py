@@ -46,14 +46,17 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
               min_points: int = stage_default(extract_roads, "min_points"),
               workers: int = 1, scheduler: str | None = None, work_dir=None,
               tile_maps: bool | None = None, tagged_las=None, rasters_dir=None,
-              quicklook=None, progress: Progress = None) -> dict:
+              background=None, quicklook=None, progress: Progress = None) -> dict:
     """The road network of a LAS/LAZ file into a road-network GeoPackage.
 
     Writes ``out_path`` (road_centrelines, road_polygons, junctions, and the QA layers of
     the cue: rectangles and hypotheses, or gap_edges, junction_connections and rejected)
     in the cloud's CRS; optionally ``tagged_las`` (the cloud with road points in class 11),
     ``rasters_dir`` (per-level intensity and likelihood GeoTIFFs of every tile and the
-    per-level ground heights, or ``road_evidence.tif``) and a ``quicklook`` PNG.
+    per-level ground heights, or ``road_evidence.tif``), ``background`` (a GeoTIFF to show
+    beneath the roads: the ground intensity image of the lowest level where the cloud has
+    intensity, else the road evidence; its kind in the result's ``background_kind``) and a
+    ``quicklook`` PNG over the same image.
     The parameters from ``cue`` to ``work_dir`` are those of
     :func:`gisroads.lidar.pipeline.extract_roads`; ``tile_maps`` defaults to keeping the
     tiles' likelihood maps only when ``rasters_dir`` is given. ``cloud_path`` may also be
@@ -112,14 +115,14 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
                                                       network.polygons.to_crs(working),
                                                       heights)
             result["tagged_las"] = Path(tagged_las)
+        if background is not None or quicklook is not None:
+            report(progress, 0.95, "imaging the background")
+            beneath, kind = _background(roads, working)
+        if background is not None and beneath is not None:
+            write_geotiff(background, beneath, band_names=[kind.replace(" ", "_")])
+            result["background"], result["background_kind"] = Path(background), kind
         if quicklook is not None:
             report(progress, 0.97, "drawing the quick-look")
-            background = None
-            if roads.imaged:
-                intensity = roads.mosaic("intensity", bands=1)
-                background = GeoRaster(intensity.data[0], intensity.transform, working)
-            elif roads.evidence is not None:
-                background = roads.evidence
             # the QA layer of the cue: the selected rectangles, or the bridged gaps
             qa = (read_layer(out_path, "rectangles") if roads.cue == "intensity"
                   else network.qa["gap_edges"].query("selected"))
@@ -133,13 +136,24 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
                  dict(color="red", linewidth=1.5, label="road centre lines")),
                 (network.junctions.to_crs(working),
                  dict(color="yellow", markersize=20, label="junctions")),
-            ], background=background,
-                title=f"{Path(str(cloud_path)).name}: roads over the "
-                      + ("road evidence" if roads.evidence is not None
-                         else "ground intensity (level 0)"))
+            ], background=beneath,
+                title=f"{Path(str(cloud_path)).name}: roads over the {kind}")
             result["quicklook"] = Path(quicklook)
     report(progress, 1.0, "done")
     return result
+
+
+def _background(roads: TiledRoads, working) -> tuple[GeoRaster | None, str]:
+    """What the roads are shown over, and its name: the ground intensity (the lowest
+    level's where the tiles imaged levels), else the road evidence."""
+    if roads.imaged:
+        intensity = roads.mosaic("intensity", bands=1)
+        return GeoRaster(intensity.data[0], intensity.transform, working), "ground intensity"
+    if roads.ground_intensity is not None and np.isfinite(roads.ground_intensity.data).any():
+        return roads.ground_intensity, "ground intensity"
+    if roads.evidence is not None:
+        return roads.evidence, "road evidence"
+    return None, ""
 
 
 def _write_tiles(roads: TiledRoads, out_path, rasters: Path | None, *, tile_maps: bool,
@@ -227,7 +241,7 @@ def evidence_job(cloud_path, out_path, *, cell_m: float | None = None,
     """The road-evidence raster of a LAS/LAZ file (the ``evidence`` cue of ``gisroads
     lidar``) as a one-band GeoTIFF of road likelihood in [0, 1] (NaN outside the data), in
     the cloud's metre working CRS; see :func:`gisroads.lidar.pipeline.evidence_raster`."""
-    likelihood, _, used, missing = evidence_raster(cloud_path, cell_m=cell_m, tile_m=tile_m,
+    likelihood, _, _, used, missing = evidence_raster(cloud_path, cell_m=cell_m, tile_m=tile_m,
                                                 overlap_m=overlap_m, progress=progress)
     if likelihood is None:
         raise GisroadsError(f"{cloud_path}: no tile holds enough points to image")

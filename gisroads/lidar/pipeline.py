@@ -75,6 +75,9 @@ class EvidenceMosaic(NamedTuple):
     flanks: GeoRaster | None
     """Two bands on the same grid: vehicle cells (:func:`gisroads.lidar.evidence.vehicle_cells`)
     and pulse dropout cells (:func:`gisroads.lidar.evidence.dropout_cells`)."""
+    ground_intensity: GeoRaster | None
+    """2-D mean intensity of the ground's last returns over that of the bright ground, on the
+    same grid; NaN where the file records none: what the roads are seen over."""
     used: dict
     """Cue -> how it was measured (first tile)."""
     missing: dict
@@ -105,6 +108,9 @@ class LidarRoads:
     tiles: list[TileRoads] = field(default_factory=list)
     evidence: GeoRaster | None = None
     """The road likelihood (``cue="evidence"``), in the working metre CRS."""
+    ground_intensity: GeoRaster | None = None
+    """The ground's intensity on the evidence's grid (``cue="evidence"``; see
+    :class:`EvidenceMosaic`)."""
     cues: dict = field(default_factory=dict)
     """Cue name -> how it was measured (``cue="evidence"``: those the file allowed)."""
     run: dict = field(default_factory=dict)
@@ -274,8 +280,11 @@ def _run_tile(job: _TileJob, tile: Tile):
             evidence = road_evidence(cloud, bounds=tile.bounds, references=job.references,
                                      **job.options)
             raster = evidence.likelihood
+            intensity = evidence.measures.get("intensity")
             bands = np.stack([raster.data, vehicle_cells(evidence).data,
-                              dropout_cells(evidence).data])
+                              dropout_cells(evidence).data,
+                              np.full(raster.data.shape, np.nan, np.float32)
+                              if intensity is None else intensity.data])
             result = (GeoRaster(bands, raster.transform, raster.crs),
                       evidence.references, evidence.used, evidence.missing)
     del cloud
@@ -414,19 +423,19 @@ def _evidence_from_store(store: TileStore, *, cell_m, min_points, workers, sched
     pieces = [(tile, r[0]) for tile, r in zip(tiles, results) if r is not None]
     run["with_points"] = len(pieces)
     if not pieces:
-        return EvidenceMosaic(None, None, {}, {})
+        return EvidenceMosaic(None, None, None, {}, {})
     _, _, used, missing = next(r for r in results if r is not None)
     mosaic = mosaic_cores(pieces, cell_m)
-    return EvidenceMosaic(GeoRaster(mosaic.data[0], mosaic.transform, mosaic.crs),
-                          GeoRaster(mosaic.data[1:], mosaic.transform, mosaic.crs),
-                          used, missing)
+    band = [GeoRaster(data, mosaic.transform, mosaic.crs)
+            for data in (mosaic.data[0], mosaic.data[1:3], mosaic.data[3])]
+    return EvidenceMosaic(*band, used, missing)
 
 
 def _evidence_roads(path, *, threshold: float, network_options: dict | None,
                     progress: Progress, **raster_options) -> LidarRoads:
     working, source = inputs_crs(las_inputs(path))
     run: dict = {}
-    likelihood, flanks, used, _ = evidence_raster(
+    likelihood, flanks, intensity, used, _ = evidence_raster(
         path, progress=scaled(progress, 0.0, 0.6), _run=run, **raster_options)
     if likelihood is None:
         network = lines_to_network(_no_lines(working), method=EVIDENCE_METHOD)
@@ -456,7 +465,8 @@ def _evidence_roads(path, *, threshold: float, network_options: dict | None,
         network = RoadNetwork(*(frame.to_crs(source) for frame in (
             network.centrelines, network.polygons, network.junctions)),
             {name: frame.to_crs(source) for name, frame in network.qa.items()})
-    return LidarRoads(network, None, evidence=likelihood, cues=used, run=run)
+    return LidarRoads(network, None, evidence=likelihood, ground_intensity=intensity,
+                      cues=used, run=run)
 
 
 def service_lines(lines: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
@@ -597,7 +607,9 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = TILE_M,
                                     progress=progress, tile_m=tile_m, overlap_m=overlap_m,
                                     cell_m=cell_m, min_points=min_points, **parallel)
             tiled = TiledRoads(roads.network, cue, tiles=[], files=[], levels=0, imaged=False,
-                               evidence=roads.evidence, cues=roads.cues, run=roads.run)
+                               evidence=roads.evidence,
+                               ground_intensity=roads.ground_intensity, cues=roads.cues,
+                               run=roads.run)
         else:
             store = open_store(path, work_dir, tile_m=tile_m, overlap_m=overlap_m,
                                workers=workers, scheduler=scheduler,
@@ -705,6 +717,7 @@ class TiledRoads:
     imaged: bool
     """Some tile has an intensity image."""
     evidence: GeoRaster | None = None
+    ground_intensity: GeoRaster | None = None
     cues: dict = field(default_factory=dict)
     run: dict = field(default_factory=dict)
     crs: tuple | None = None
@@ -783,7 +796,8 @@ class TiledRoads:
         """Everything in memory: the QA layers in ``network.qa``, the heights mosaic and
         every tile's result (``maps`` as in :meth:`results`), for inputs that fit."""
         if self.cue == "evidence":
-            return LidarRoads(self.network, None, evidence=self.evidence, cues=self.cues,
+            return LidarRoads(self.network, None, evidence=self.evidence,
+                              ground_intensity=self.ground_intensity, cues=self.cues,
                               run=self.run)
         results = list(self.results(maps=maps))
         parts = [self.qa(r) for r in results]

@@ -141,3 +141,15 @@ def network_output(tr, text: str) -> QgsProcessingParameterFileDestination:
                                                   "GeoPackage (*.gpkg)")
     param.setHelp(tr(text))
     return param
+
+
+def background_output(tr) -> QgsProcessingParameterFileDestination:
+    """The parameter ``BACKGROUND`` of a LiDAR road network: the GeoTIFF to see the roads
+    over, loaded beneath them (a temporary file by default)."""
+    param = QgsProcessingParameterFileDestination("BACKGROUND", tr("Background raster"),
+                                                  "GeoTIFF (*.tif)", optional=True,
+                                                  createByDefault=True)
+    param.setHelp(tr("the cloud's ground intensity image (its road evidence where the file "
+                     "records no intensity), added to the project beneath the roads; a "
+                     "temporary file unless saved"))
+    return param

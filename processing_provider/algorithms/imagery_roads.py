@@ -8,7 +8,7 @@ from gisroads.imagery.segments import MIN_SEGMENT_PX, SEGMENT_AREA_M2
 from gisroads.jobs import image_job
 
 from ..convert import gisroads_errors, progress_callback
-from ..loading import load_geopackage_on_completion
+from ..loading import load_beneath_on_completion, load_geopackage_on_completion
 from .base import GisroadsAlgorithm, network_output
 from .imagery_inputs import band_options, imagery_parameters
 
@@ -124,6 +124,7 @@ class ImageryRoadNetwork(GisroadsAlgorithm):
         load_geopackage_on_completion(context, out, (
             *qa, "gap_edges", "junction_connections", POLYGONS, CENTRELINES, JUNCTIONS),
             title=image.name())
+        load_beneath_on_completion(context, image.source(), "image", title=image.name())
         outputs = {"PROBABILITY": str(result["probability"])} if "probability" in result else {}
         return {"OUTPUT": out, "CUES": result["cues"], **outputs,
                 **self.network_outputs(result, feedback, f"; cues: {result['cues']}")}

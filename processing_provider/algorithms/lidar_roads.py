@@ -11,8 +11,9 @@ from gisroads.lidar.pipeline import CUES, DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, E
 from gisroads.parallel import default_workers
 
 from ..convert import gisroads_errors, progress_callback
-from ..loading import load_geopackage_on_completion
-from .base import GisroadsAlgorithm, cloud_input, network_output, workers_parameter
+from ..loading import load_beneath_on_completion, load_geopackage_on_completion
+from .base import (GisroadsAlgorithm, background_output, cloud_input, network_output,
+                   workers_parameter)
 
 
 class LidarRoadNetwork(GisroadsAlgorithm):
@@ -78,6 +79,7 @@ class LidarRoadNetwork(GisroadsAlgorithm):
              "over-segmentation size (paper: 100-200)"),
             (workers_parameter(self.tr, "tiles"), None),
             (network_output(self.tr, "GeoPackage receiving every layer, in the cloud's CRS"), None),
+            (background_output(self.tr), None),
             (QgsProcessingParameterFileDestination("TAGGED_LAS",
                                                    self.tr("Cloud with road points (class 11)"),
                                                    "LAZ (*.laz);;LAS (*.las)", optional=True,
@@ -94,11 +96,12 @@ class LidarRoadNetwork(GisroadsAlgorithm):
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
         tagged = self.parameterAsFileOutput(parameters, "TAGGED_LAS", context) or None
         rasters = self.parameterAsString(parameters, "RASTERS", context) or None
+        background = self.parameterAsFileOutput(parameters, "BACKGROUND", context) or None
         cloud = self.parameterAsFile(parameters, "INPUT", context)
         with gisroads_errors(feedback):
             result = lidar_job(
-                cloud, out, tagged_las=tagged,
-                rasters_dir=rasters, progress=progress_callback(feedback),
+                cloud, out, tagged_las=tagged, rasters_dir=rasters, background=background,
+                progress=progress_callback(feedback),
                 cue=CUES[self.parameterAsEnum(parameters, "CUE", context)],
                 threshold=self.parameterAsDouble(parameters, "THRESHOLD", context),
                 cell_m=(self.parameterAsDouble(parameters, "CELL", context)
@@ -115,5 +118,9 @@ class LidarRoadNetwork(GisroadsAlgorithm):
               else ("rejected", "gap_edges", "junction_connections", SERVICE_CENTRELINES))
         load_geopackage_on_completion(context, out, (*qa, POLYGONS, CENTRELINES, JUNCTIONS),
                                       title=Path(cloud).stem)
+        if "background" in result:
+            load_beneath_on_completion(context, str(result["background"]),
+                                       result["background_kind"], title=Path(cloud).stem)
         return {"OUTPUT": out, "TAGGED_LAS": tagged, "RASTERS": rasters,
+                "BACKGROUND": str(result["background"]) if "background" in result else None,
                 **self.network_outputs(result, feedback)}

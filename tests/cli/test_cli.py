@@ -4,6 +4,7 @@ import sqlite3
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import shapely
 
@@ -103,7 +104,8 @@ def test_lidar_writes_network_tagged_cloud_and_quicklook(tmp_path):
                 density_per_m2=3.0)
     result = gisroads("lidar", tmp_path / "c.laz", "-o", tmp_path / "roads.gpkg",
                       "--tagged-las", tmp_path / "tagged.laz", "--quicklook",
-                      tmp_path / "roads.png", "--json")
+                      tmp_path / "roads.png", "--background", tmp_path / "beneath.tif",
+                      "--json")
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary["roads"] > 0 and summary["tagged_points"] > 1000
@@ -115,6 +117,21 @@ def test_lidar_writes_network_tagged_cloud_and_quicklook(tmp_path):
     tagged = read_las(tmp_path / "tagged.laz")
     assert (tagged.classification == 11).sum() == summary["tagged_points"]
     assert (tmp_path / "roads.png").stat().st_size > 10_000
+    # the ground intensity to show beneath the roads, in the cloud's CRS, on the evidence's
+    # cells (0.5 m, wider for a sparse cloud)
+    from gisroads.io.raster import read_raster
+    assert summary["background_kind"] == "ground intensity"
+    beneath = read_raster(summary["background"])
+    roads = read_layer(tmp_path / "roads.gpkg", "road_centrelines")
+    assert 0.5 <= beneath.transform.a <= 1.0 and beneath.crs == roads.crs
+    bounds = beneath.bounds
+    assert bounds[2] - bounds[0] > 290 and bounds[3] - bounds[1] > 290
+    lines = roads.geometry.values
+    points = shapely.get_coordinates(shapely.line_interpolate_point(
+        lines, np.linspace(0.1, 0.9, 9)[:, None] * shapely.length(lines)))
+    cols, rows = ~beneath.transform * points.T
+    on_roads = beneath.data.reshape(beneath.shape)[rows.astype(int), cols.astype(int)]
+    assert np.nanmedian(on_roads) < np.nanmedian(beneath.data)  # asphalt is dark
 
 
 def test_lidar_on_a_cloud_without_roads_writes_empty_layers_and_warns(lidar_dir, tmp_path):

@@ -112,17 +112,20 @@ def run_algorithm(qgis_app):
 
 @pytest.fixture
 def run_and_load(run_algorithm, qgis_processing):
-    """``run_and_load(algorithm, params)``: an algorithm instance run in this process, its
-    outputs then loaded as the toolbox dialog loads them (Processing's
-    handleAlgorithmResults) into the cleared project; returns ``{layer name: ticked}`` of
-    the layer tree. The project is cleared again afterwards."""
+    """``run_and_load(algorithm, params, existing=())``: an algorithm instance run in this
+    process, its outputs then loaded as the toolbox dialog loads them (Processing's
+    handleAlgorithmResults) into the cleared project holding the layers ``existing``;
+    returns ``{layer name: ticked}`` of the layer tree, top to bottom. The project is
+    cleared again afterwards."""
     from processing.gui.Postprocessing import handleAlgorithmResults
     from qgis.core import QgsProcessingContext, QgsProcessingFeedback, QgsProject
 
     project = QgsProject.instance()
 
-    def run(algorithm, params):
+    def run(algorithm, params, existing=()):
         project.clear()
+        for layer in existing:
+            project.addMapLayer(layer)
         context = QgsProcessingContext()
         context.setProject(project)
         feedback = QgsProcessingFeedback()

@@ -158,25 +158,36 @@ def test_segments_style_tells_road_parts_from_rejected_segments(qgis_app, fields
 FUSA_LAYERS = {"fusa – road centre lines": True, "fusa – road polygons": True,
                "fusa – junctions": True, "fusa – service ways": True,
                "fusa – bridged gaps (QA)": False, "fusa – junction connections (QA)": False,
-               "fusa – rejected parts (QA)": False}
-"""The layers a LiDAR road network run on fusa adds to the project, and whether each is
-ticked."""
+               "fusa – rejected parts (QA)": False, "fusa – ground intensity": True}
+"""The layers a LiDAR road network run on fusa adds to the project (with the background
+raster, as the dialog writes it by default), and whether each is ticked."""
 
 
 def test_a_run_loads_its_layers_named_after_the_input_with_the_qa_layers_hidden(
         run_and_load, lidar_dir, tmp_path):
     """What the toolbox dialog does when the algorithm ends: the layers are named after
-    the input, styled, the road network ticked and the QA layers unticked."""
-    from qgis.core import QgsApplication, QgsProject
+    the input, styled, the road network ticked and the QA layers unticked, the cloud's
+    ground intensity beneath them and above what the project held."""
+    from qgis.core import QgsApplication, QgsProject, QgsVectorLayer
 
     algorithm = QgsApplication.processingRegistry().createAlgorithmById(
         "gisroads:lidarroadnetwork")
+    basemap = QgsVectorLayer("Polygon?crs=EPSG:3044", "basemap", "memory")
     ticked = run_and_load(algorithm, {"INPUT": str(lidar_dir / "fusa.laz"),
-                                      "OUTPUT": str(tmp_path / "roads.gpkg")})
-    assert ticked == FUSA_LAYERS
+                                      "OUTPUT": str(tmp_path / "roads.gpkg"),
+                                      "BACKGROUND": "TEMPORARY_OUTPUT"}, existing=[basemap])
+    assert ticked == {**FUSA_LAYERS, "basemap": True}
+    assert list(ticked)[-2:] == ["fusa – ground intensity", "basemap"]
+    intensity = QgsProject.instance().mapLayersByName("fusa – ground intensity")[0]
+    assert intensity.isValid() and intensity.crs() == lines_crs(tmp_path / "roads.gpkg")
     lines = QgsProject.instance().mapLayersByName("fusa – road centre lines")[0]
     assert lines.featureCount() > 20
     assert lines.renderer().symbol().color().name() == "#e31a1c"  # styles/*.qml
+
+
+def lines_crs(gpkg):
+    from qgis.core import QgsVectorLayer
+    return QgsVectorLayer(f"{gpkg}|layername=road_centrelines", "lines", "ogr").crs()
 
 
 def test_the_loaders_network_layers_are_the_cores(qgis_app):

@@ -255,8 +255,9 @@ def test_external_mode_loads_the_layers_as_in_process(run_and_load, lidar_dir, t
     algorithm = ExternalLidarRoadNetwork(external_gisroads())
     algorithm.initAlgorithm()
     ticked = run_and_load(algorithm, {"INPUT": str(lidar_dir / "fusa.laz"),
-                                      "OUTPUT": str(tmp_path / "roads.gpkg")})
-    assert ticked == FUSA_LAYERS
+                                      "OUTPUT": str(tmp_path / "roads.gpkg"),
+                                      "BACKGROUND": "TEMPORARY_OUTPUT"})
+    assert ticked == FUSA_LAYERS and list(ticked)[-1] == "fusa – ground intensity"
     lines = QgsProject.instance().mapLayersByName("fusa – road centre lines")[0]
     assert lines.renderer().symbol().color().name() == "#e31a1c"
 
@@ -273,8 +274,15 @@ def test_external_mode_runs_the_imagery_pipeline_and_loads_its_layers(run_and_lo
                                       "OUTPUT": str(tmp_path / "roads.gpkg")})
     assert {name: on for name, on in ticked.items() if on} == {
         "image – road centre lines": True, "image – road polygons": True,
-        "image – junctions": True}
+        "image – junctions": True, "image – image": True}
     assert "image – bridged gaps (QA)" in ticked
+    assert list(ticked)[-1] == "image – image"  # the input beneath the roads
+    # an image of the project is not added again
+    from qgis.core import QgsRasterLayer
+    layer = QgsRasterLayer(str(scene_dir / "image.tif"), "ortho")
+    again = run_and_load(algorithm, {"INPUT": layer.id(), "OUTPUT": str(tmp_path / "b.gpkg")},
+                         existing=[layer])
+    assert list(again)[-1] == "ortho" and "ortho – image" not in again
     lines = read_layer(tmp_path / "roads.gpkg", "road_centrelines")
     truth = read_layer(scene_dir / "truth.gpkg", "road_centrelines")
     # the bundled network on a rendered scene (no training source): measured 0.506 / 0.747
