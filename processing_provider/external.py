@@ -10,8 +10,9 @@ the private environment that *Set up gisroads* makes in the QGIS profile
 (SIGTERM: it removes what it was writing).
 
 Standard library and qgis only: this module must import where gisroads cannot. So far the
-two whole pipelines run this way, LiDAR and imagery (their layers loaded as in-process:
-:mod:`.loading`); the other algorithms need the packages in QGIS.
+whole pipelines run this way (LiDAR, imagery, map-guided snakes) and the network stage
+(:data:`EXTERNAL_ALGORITHMS`, their layers loaded as in-process: :mod:`.loading`); the
+other algorithms need the packages in QGIS.
 """
 from __future__ import annotations
 
@@ -21,11 +22,11 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
+from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingOutputNumber, QgsProcessingParameterEnum,
-                       QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
-                       QgsProcessingParameterRasterLayer,
-                       QgsProcessingProvider, QgsSettings)
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
+                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
+                       QgsProcessingParameterRasterLayer, QgsProcessingProvider, QgsSettings)
 
 from .algorithms.base import background_output, workers_parameter
 from .environment import ready_executable
@@ -130,7 +131,7 @@ class _ExternalRoadNetwork(QgsProcessingAlgorithm):
         """``(parameter, help text)`` of the algorithm, OUTPUT excepted."""
         raise NotImplementedError
 
-    def arguments(self, parameters, context) -> tuple[str, list[str]]:
+    def arguments(self, parameters, context, feedback) -> tuple[str, list[str]]:
         """The input's path and the subcommand's other arguments."""
         raise NotImplementedError
 
@@ -149,7 +150,7 @@ class _ExternalRoadNetwork(QgsProcessingAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
-        source, arguments = self.arguments(parameters, context)
+        source, arguments = self.arguments(parameters, context, feedback)
         result = run_external(self.executable,
                               [self.SUBCOMMAND, source, "-o", out, *arguments], feedback)
         feedback.pushInfo(f"{result['roads']} roads, {result['length_m']:.0f} m, "
@@ -169,7 +170,7 @@ class _ExternalRoadNetwork(QgsProcessingAlgorithm):
 
     def title(self, parameters, context) -> str:
         """What the loaded layers are named after: the input's name."""
-        return Path(self.arguments(parameters, context)[0]).stem
+        return Path(self.parameterAsFile(parameters, "INPUT", context)).stem
 
 
 class ExternalLidarRoadNetwork(_ExternalRoadNetwork):
@@ -198,7 +199,7 @@ class ExternalLidarRoadNetwork(_ExternalRoadNetwork):
             (background_output(str), None),
         ]
 
-    def arguments(self, parameters, context):
+    def arguments(self, parameters, context, feedback):
         background = self.parameterAsFileOutput(parameters, "BACKGROUND", context)
         return (self.parameterAsFile(parameters, "INPUT", context),
                 ["--cue", self.CUES[self.parameterAsEnum(parameters, "CUE", context)],
@@ -230,7 +231,7 @@ class ExternalImageryRoadNetwork(_ExternalRoadNetwork):
              "optional: a DSM in metres on the image's area"),
         ]
 
-    def arguments(self, parameters, context):
+    def arguments(self, parameters, context, feedback):
         image = self.parameterAsRasterLayer(parameters, "INPUT", context)
         dsm = self.parameterAsRasterLayer(parameters, "DSM", context)
         return image.source(), (["--dsm", dsm.source()] if dsm is not None else [])
@@ -240,6 +241,78 @@ class ExternalImageryRoadNetwork(_ExternalRoadNetwork):
 
     def beneath(self, parameters, context, result):
         return self.parameterAsRasterLayer(parameters, "INPUT", context).source(), "image"
+
+
+class ExternalRoadRasterToNetwork(_ExternalRoadNetwork):
+    """Road raster to network through ``gisroads vectorize``."""
+
+    NAME, DISPLAY_NAME, GROUP = ("roadrastertonetwork", "Road raster to network",
+                                 "Road network")
+    SUBCOMMAND = "vectorize"
+    HELP = ("Turns any road raster (a mask, or a probability 0-1 or 0-255) into a clean, "
+            "connected road network, the network stage every gisroads method ends in")
+
+    def parameters(self):
+        return [
+            (QgsProcessingParameterRasterLayer("INPUT", "Road raster"),
+             "road mask or probability raster, projected or geographic; the layer's file is "
+             "what is read"),
+            (QgsProcessingParameterNumber("BAND", "Band", QgsProcessingParameterNumber.Integer,
+                                          1, minValue=1),
+             "1-based band holding the road mask or probability"),
+            (QgsProcessingParameterNumber("THRESHOLD", "Road threshold",
+                                          QgsProcessingParameterNumber.Double, 0.5,
+                                          minValue=0.0, maxValue=1.0),
+             "pixels whose smoothed probability reaches this are road (0-1; a 0-255 raster "
+             "is scaled to 0-1 first)"),
+        ]
+
+    def arguments(self, parameters, context, feedback):
+        raster = self.parameterAsRasterLayer(parameters, "INPUT", context)
+        return raster.source(), [
+            "--band", str(self.parameterAsInt(parameters, "BAND", context)),
+            "--threshold", str(self.parameterAsDouble(parameters, "THRESHOLD", context))]
+
+    def title(self, parameters, context):
+        return self.parameterAsRasterLayer(parameters, "INPUT", context).name()
+
+
+class ExternalRibbonSnakeRoads(_ExternalRoadNetwork):
+    """Ribbon-snake road boundaries through ``gisroads snakes``; the road map, any layer of
+    the project (a selection, PostGIS, WFS), goes to it as a temporary GeoPackage."""
+
+    NAME, DISPLAY_NAME, GROUP = ("ribbonsnakeroads", "Ribbon-snake road boundaries",
+                                 "Map-guided snakes")
+    SUBCOMMAND = "snakes"
+    HELP = ("Fits the roads of an approximate road map to a LAS/LAZ point cloud from kerb to "
+            "kerb (Boyko &amp; Funkhouser: the map registered in 3D, a curb attractor map "
+            "per road, ribbon snakes)")
+    DETECTORS = ["exp", "step", "none"]
+
+    def parameters(self):
+        return [
+            (QgsProcessingParameterFile("INPUT", "Point cloud (LAS/LAZ)",
+                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)"),
+             "the cloud; read chunk by chunk, only along the map"),
+            (QgsProcessingParameterFeatureSource("MAP", "Road map lines",
+                                                 [QgsProcessing.TypeVectorLine]),
+             "approximate road centre lines in any CRS (reprojected to the cloud's)"),
+            (QgsProcessingParameterEnum("DETECTOR", "Curb detector",
+                                        options=["exp: Gaussian, 15 cm mean (paper's best)",
+                                                 "step: 10-20 cm", "none: normals only"],
+                                        defaultValue=0),
+             "how the height step of a neighbourhood weights its normal's tilt"),
+            (workers_parameter(str, "road patches"), None),
+        ]
+
+    def arguments(self, parameters, context, feedback):
+        road_map = self.parameterAsCompatibleSourceLayerPath(
+            parameters, "MAP", context, ["gpkg"], "gpkg", feedback)
+        return self.parameterAsFile(parameters, "INPUT", context), [
+            road_map,
+            "--curb-detector", self.DETECTORS[self.parameterAsEnum(parameters, "DETECTOR",
+                                                                     context)],
+            "--workers", str(self.parameterAsInt(parameters, "WORKERS", context))]
 
 
 class ExternalProvider(QgsProcessingProvider):
@@ -264,7 +337,7 @@ class ExternalProvider(QgsProcessingProvider):
     def loadAlgorithms(self):  # noqa: N802
         self.addAlgorithm(SetUpGisroads(on_ready=self.use))
         if self.executable is not None:
-            for algorithm in (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork):
+            for algorithm in EXTERNAL_ALGORITHMS:
                 self.addAlgorithm(algorithm(self.executable))
 
     def use(self, executable: str):
@@ -273,3 +346,8 @@ class ExternalProvider(QgsProcessingProvider):
         self.refreshAlgorithms()
         if self.on_ready is not None:
             self.on_ready(executable)
+
+
+EXTERNAL_ALGORITHMS = (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork,
+                       ExternalRoadRasterToNetwork, ExternalRibbonSnakeRoads)
+"""The algorithms that run through the external ``gisroads``: same ids as in-process."""

@@ -21,7 +21,8 @@ LAYER_TITLES = {"road_centrelines": "road centre lines", "road_polygons": "road 
                 "junction_connections": "junction connections (QA)",
                 "rejected": "rejected parts (QA)", "rectangles": "selected rectangles (QA)",
                 "hypotheses": "rectangle hypotheses (QA)", "segments": "segments (QA)",
-                "road_parts": "road parts (QA)"}
+                "road_parts": "road parts (QA)", "ribbon_patches": "ribbons (QA)",
+                "registered_map": "registered map (QA)"}
 
 
 class ApplyStyle(QgsProcessingLayerPostProcessorInterface):

@@ -1,8 +1,9 @@
 """Ribbon-snake road boundaries: the whole map-guided pipeline (Boyko & Funkhouser)."""
+from pathlib import Path
+
 from qgis.core import (QgsProcessingParameterFileDestination,
                        QgsProcessingParameterRasterDestination)
 
-from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import snakes_job
 from gisroads.parallel import default_workers
 
@@ -59,8 +60,7 @@ class RibbonSnakeRoads(GisroadsAlgorithm):
                 cloud, lines, out, tagged_las=tagged, attractor_tif=attractor,
                 workers=self.parameterAsInt(parameters, "WORKERS", context) or default_workers(),
                 progress=progress_callback(feedback), **options)
-        load_geopackage_on_completion(context, out, ("ribbon_patches", POLYGONS, CENTRELINES,
-                                                     JUNCTIONS), group="roads")
+        load_geopackage_on_completion(context, out, title=Path(cloud).stem)
         return {"OUTPUT": out, "TAGGED_LAS": tagged, "ATTRACTOR": attractor,
                 **self.network_outputs(result, feedback, f", {result['converged']} of "
                                        f"{result['patches']} ribbons converged")}

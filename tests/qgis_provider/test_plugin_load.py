@@ -142,6 +142,7 @@ def test_without_a_gisroads_command_the_bar_offers_the_set_up(qgis_app, qgis_ifa
         plugin.provider.use("/opt/gisroads-env/bin/gisroads")
         assert sorted(a.id() for a in plugin.provider.algorithms()) == [
             "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
+            "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork",
             "gisroads:setupgisroads"]
         assert registry.algorithmById("gisroads:lidarroadnetwork").executable == (
             "/opt/gisroads-env/bin/gisroads")
@@ -225,7 +226,8 @@ def test_external_mode_runs_the_lidar_pipeline_through_gisroads(external_qgis_pr
     listed = external_qgis_process("list")
     assert "Traceback" not in listed.stdout + listed.stderr
     assert re.findall(r"^\s*(gisroads:\S+)", listed.stdout, flags=re.M) == [
-        "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork", "gisroads:setupgisroads"]
+        "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
+        "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork", "gisroads:setupgisroads"]
     out = tmp_path / "fusa.gpkg"
     done = external_qgis_process("--json", "run", "gisroads:lidarroadnetwork", "--",
                                  f"INPUT={lidar_dir / 'fusa.laz'}", f"OUTPUT={out}")
@@ -334,3 +336,54 @@ def test_desktop_dialog_runs_the_lidar_pipeline_through_external_gisroads(plugin
     for name in ("dialog.png", "dialog_after_run.png"):
         image = imread(tmp_path / name)
         assert image.shape[0] > 400 and image.shape[1] > 600 and image.std() > 20
+
+
+@pytest.fixture(scope="module")
+def mask_tif(tmp_path_factory) -> Path:
+    """A real road mask (Massachusetts) as a GeoTIFF."""
+    from dataclasses import replace
+
+    from gisroads.imagery.datasets import load_massachusetts
+    from gisroads.io.raster import write_geotiff
+
+    mask = load_massachusetts(stems=["10378795_15"])[0].truth_mask
+    return write_geotiff(tmp_path_factory.mktemp("mask") / "mask.tif",
+                         replace(mask, data=mask.data.astype("uint8")))
+
+
+@pytest.fixture(scope="module")
+def snake_inputs(tmp_path_factory) -> dict:
+    from tests.qgis_provider.map_scenes import cloud_and_map, map_inputs
+
+    _, folder = cloud_and_map(tmp_path_factory.mktemp("snakes"), seed=4, features=(),
+                              density_per_m2=8.0)
+    return {k: str(v) for k, v in map_inputs(folder).items()}
+
+
+@pytest.mark.parametrize("name", ["roadrastertonetwork", "ribbonsnakeroads"])
+def test_external_and_in_process_algorithms_give_the_same_layers(
+        name, run_and_load, mask_tif, snake_inputs, tmp_path):
+    """Each algorithm that runs through the external command adds the same layers, named,
+    ticked and filled as its in-process twin (here both run this environment's gisroads)."""
+    from qgis.core import QgsApplication, QgsProject, QgsVectorLayer
+
+    from processing_provider.external import EXTERNAL_ALGORITHMS
+
+    inputs = {"roadrastertonetwork": {"INPUT": str(mask_tif)},
+              "ribbonsnakeroads": {**snake_inputs, "WORKERS": 1}}[name]
+    external = next(a for a in EXTERNAL_ALGORITHMS if a.NAME == name)(external_gisroads())
+    external.initAlgorithm()
+    in_process = QgsApplication.processingRegistry().createAlgorithmById(f"gisroads:{name}")
+    runs = {}
+    for mode, algorithm in (("in-process", in_process), ("external", external)):
+        out = tmp_path / f"{mode}.gpkg"
+        ticked = run_and_load(algorithm, {**inputs, "OUTPUT": str(out)})
+        lines = QgsVectorLayer(f"{out}|layername=road_centrelines", "lines", "ogr")
+        runs[mode] = (ticked, lines.featureCount(),
+                      sum(f.geometry().length() for f in lines.getFeatures()))
+        assert QgsProject.instance().count() == len(ticked)
+    assert runs["external"][0] == runs["in-process"][0]
+    assert runs["external"][1] == runs["in-process"][1] > 0
+    assert runs["external"][2] == pytest.approx(runs["in-process"][2], rel=1e-9)
+    title = Path(inputs["INPUT"]).stem
+    assert runs["external"][0][f"{title} – road centre lines"] is True
