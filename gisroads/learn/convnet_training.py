@@ -95,7 +95,9 @@ class LabelledTile:
     ----------
     bands : ndarray of float32, shape (3, rows, cols)
         Reflectance-like values in [0, 1] (8-bit values / 255).
-    road, valid : ndarray of bool, shape (rows, cols)
+    road : ndarray of bool, or of float in [0, 1] (soft targets), shape (rows, cols)
+    valid : ndarray of bool, shape (rows, cols)
+        Pixels in the loss.
     source : str
         Name of the data source, for per-source sampling and reporting.
     """
@@ -149,7 +151,8 @@ def _affine_crop(tile: LabelledTile, rng: np.random.Generator, crop_px: int,
         return ndimage.affine_transform(layer, matrix, offset, output_shape=shape, order=order,
                                         mode="constant", cval=cval)
     bands = np.stack([warp(b, 1) for b in tile.bands])
-    road = warp(tile.road.astype(np.float32), 1) > 0.5
+    road = warp(tile.road.astype(np.float32), 1)
+    road = road > 0.5 if tile.road.dtype == bool else road  # soft targets stay soft
     valid = warp(tile.valid.astype(np.float32), 0) > 0.5
     return bands, road, valid
 
@@ -223,7 +226,7 @@ def training_batch(tiles: list[LabelledTile], rng: np.random.Generator, *, batch
         else:
             low, high = 0.0, 1.0
         xs.append(network_input(bands, valid, low, high))
-        roads.append(road & valid)
+        roads.append(np.where(valid, road, 0))
         valids.append(valid)
     return (torch.from_numpy(np.stack(xs)),
             torch.from_numpy(np.stack(roads)[:, None].astype(np.float32)),
@@ -406,7 +409,7 @@ def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
                        width_field: str | None = None, default_width_m: float = 6.0,
                        guard_m: float = 5.0, core_fraction: float = 1.0,
                        steps: int = FINE_TUNE_STEPS, learning_rate: float = 3e-4,
-                       unmapped_probability: float | None = 0.3, seed: int = 0,
+                       off_layer: str = "base", seed: int = 0,
                        progress: Progress = None) -> tuple[RoadUNet, dict]:
     """Fine-tune the convolutional road model on an image with a road layer as labels (the
     road-database update case).
@@ -433,12 +436,12 @@ def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
         model's.
     learning_rate : float
         Peak of the one-cycle schedule: low, so that the model stays near the base.
-    unmapped_probability : float or None
-        Pixels off the layer that the base model gives at least this probability (and
-        their 2-pixel neighbourhood) are left out of the loss, not taught as non-road: a
-        layer to update lacks roads, and a network taught that its missing roads are
-        background learns to miss them. None teaches every pixel off the layer as
-        non-road.
+    off_layer : {"base", "background"}
+        What the pixels off the layer (beyond the guard band) are taught. ``"base"``: the
+        base model's own probability there (soft targets): a layer to update lacks roads,
+        and a network taught that its missing roads are background learns to miss them;
+        taught its own view it keeps them and learns the image's roads from the layer.
+        ``"background"``: non-road, for a layer known to be complete.
     seed : int
 
     Returns
@@ -459,13 +462,14 @@ def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
     if not (positive & valid).any():
         raise GisroadsError("no road of the layer lies on the image")
     bands = np.clip(bands, -0.5, 1.5)
-    if unmapped_probability is not None:
-        report(progress, 0.02, "finding the roads the layer lacks")
+    if off_layer not in ("base", "background"):
+        raise GisroadsError(f"off_layer must be 'base' or 'background', not {off_layer!r}")
+    target = positive & valid
+    if off_layer == "base":
+        report(progress, 0.02, "reading the image with the base model")
         seen = predict_tiles(base, [LabelledTile(bands, positive, valid, "layer")])[0]
-        unmapped = ndimage.binary_dilation(seen >= unmapped_probability, iterations=2)
-        negative = negative & ~unmapped
-    labelled = valid & (positive | negative)
-    tile = LabelledTile(bands, positive & valid, labelled, "layer")
+        target = np.where(target, 1.0, seen).astype(np.float32)
+    tile = LabelledTile(bands, target, valid & (positive | negative), "layer")
     tuned = train_convnet([tile], steps=steps, batch=8, crop_px=224,
                           learning_rate=learning_rate, seed=seed, model=base,
                           freeze_batchnorm=True, scale_range=(0.8, 1.25), nodata_share=0.0,
@@ -473,4 +477,4 @@ def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
     road_share = float(positive[valid].mean())
     return tuned, {**metadata, "trained_on": ROAD_LAYER, "road_share": round(road_share, 4),
                    "fine_tune_steps": steps, "fine_tune_seed": seed,
-                   "unmapped_probability": unmapped_probability}
+                   "off_layer": off_layer}

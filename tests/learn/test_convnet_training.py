@@ -180,6 +180,20 @@ def test_training_batches_are_seeded_and_label_only_valid_pixels(tiles):
     assert float(x.abs().max()) <= 1.5
 
 
+def test_soft_targets_stay_soft_in_a_batch(tiles):
+    """A tile whose road is a probability (fine-tuning's off-layer targets) gives targets in
+    [0, 1] that keep their levels, zero where invalid."""
+    tile = tiles[0]
+    soft = ct.LabelledTile(tile.bands, np.where(tile.road, 1.0, 0.25).astype(np.float32),
+                           tile.valid, "soft")
+    _, road, valid = ct.training_batch([soft], np.random.default_rng(5), batch=4, crop_px=64,
+                                       scale_range=(1.0, 1.0))
+    inside = road[valid == 1]
+    assert float(inside.min()) >= 0.25 - 1e-6 and float(inside.max()) <= 1.0 + 1e-6
+    assert bool(((inside - 0.25).abs() < 1e-6).any()) and bool((inside == 1.0).any())
+    assert bool((road[valid == 0] == 0).all())
+
+
 def test_training_is_seeded(tiles):
     runs = [ct.train_convnet(tiles, steps=2, batch=2, crop_px=64, seed=4) for _ in range(2)]
     for name, value in runs[0].state_dict().items():
@@ -198,6 +212,7 @@ def test_fine_tune_on_layer_trains_on_the_road_layer(exported, scene):
     assert metadata["trained_on"] == "road layer"
     assert 0 < metadata["road_share"] < 0.5
     assert metadata["fine_tune_steps"] == 20 and metadata["fine_tune_seed"] == 0
+    assert metadata["off_layer"] == "base"
     assert metadata["pixel_m"] == METADATA["pixel_m"] and metadata["note"] == "test"
     assert calls[-1] == 1.0
     base, tuned_state = base_model.state_dict(), tuned.state_dict()
@@ -212,7 +227,9 @@ def test_fine_tune_on_layer_trains_on_the_road_layer(exported, scene):
 def test_a_fine_tuned_model_is_a_run_time_model(exported, scene, tmp_path):
     _, base_path = exported
     scene, image = scene
-    tuned, metadata = ct.fine_tune_on_layer(image, scene.roads, model=base_path, steps=2)
+    tuned, metadata = ct.fine_tune_on_layer(image, scene.roads, model=base_path, steps=2,
+                                            off_layer="background")
+    assert metadata["off_layer"] == "background"
     path = ct.export_onnx(tuned, tmp_path / "tuned.onnx", metadata)
     net = load_convnet(path)
     assert net.metadata["trained_on"] == "road layer"
@@ -227,3 +244,5 @@ def test_fine_tuning_needs_a_road_on_the_image(exported, scene):
     far["geometry"] = far.translate(xoff=10_000.0)
     with pytest.raises(ValueError, match="no road of the layer lies on the image"):
         ct.fine_tune_on_layer(image, far, model=base_path, steps=1)
+    with pytest.raises(ValueError, match="off_layer must be 'base' or 'background'"):
+        ct.fine_tune_on_layer(image, scene.roads, model=base_path, steps=1, off_layer="zero")
