@@ -28,9 +28,10 @@ from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingExcep
                        QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterLayer, QgsProcessingProvider, QgsSettings)
 
-from .algorithms.base import background_output, workers_parameter
+from .algorithms.base import add_scene_parameters, background_output, workers_parameter
 from .environment import ready_executable
-from .loading import load_beneath_on_completion, load_geopackage_on_completion
+from .loading import (load_beneath_on_completion, load_geopackage_on_completion,
+                      load_scene_on_completion)
 from .setup_gisroads import SetUpGisroads, private_environment_folder
 
 SETTING = "gisroads/executable"
@@ -94,12 +95,11 @@ def run_external(executable: str, arguments: list[str], feedback) -> dict:
     return json.loads(stdout)
 
 
-class _ExternalRoadNetwork(QgsProcessingAlgorithm):
-    """A whole pipeline through the external ``gisroads``: the same id, outputs and defaults
-    as the in-process algorithm, fewer parameters; its GeoPackage is loaded as in-process
-    (:mod:`.loading`)."""
+class _ExternalAlgorithm(QgsProcessingAlgorithm):
+    """An algorithm run through the external ``gisroads SUBCOMMAND``: the same id, outputs
+    and defaults as the in-process algorithm (a test compares them), fewer parameters."""
 
-    NAME = DISPLAY_NAME = GROUP = SUBCOMMAND = HELP = ""
+    NAME = DISPLAY_NAME = GROUP = SUBCOMMAND = HELP = OUTPUT_HELP = ""
 
     def __init__(self, executable: str):
         super().__init__()
@@ -121,29 +121,40 @@ class _ExternalRoadNetwork(QgsProcessingAlgorithm):
         return (f"<p>{self.HELP}, by running the external gisroads command "
                 f"(<code>{self.executable} {self.SUBCOMMAND}</code>): QGIS's Python lacks the "
                 "packages gisroads needs, so this runs in that command's own environment. "
-                "Output: a GeoPackage with road_centrelines, road_polygons, junctions and QA "
-                "layers, in the input's CRS, added to the project named after the input.</p>")
+                f"{self.OUTPUT_HELP}</p>")
 
     def createInstance(self):  # noqa: N802
         return type(self)(self.executable)
 
     def parameters(self) -> list:
-        """``(parameter, help text)`` of the algorithm, OUTPUT excepted."""
+        """``(parameter, help text)`` of the algorithm (a road network's OUTPUT excepted)."""
         raise NotImplementedError
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        for parameter, text in self.parameters():
+            if text is not None:
+                parameter.setHelp(text)
+            self.addParameter(parameter)
+
+
+class _ExternalRoadNetwork(_ExternalAlgorithm):
+    """A road network through the external ``gisroads``: its GeoPackage is loaded as
+    in-process (:mod:`.loading`)."""
+
+    OUTPUT_HELP = ("Output: a GeoPackage with road_centrelines, road_polygons, junctions and "
+                   "QA layers, in the input's CRS, added to the project named after the "
+                   "input.")
 
     def arguments(self, parameters, context, feedback) -> tuple[str, list[str]]:
         """The input's path and the subcommand's other arguments."""
         raise NotImplementedError
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        params = [*self.parameters(),
-                  (QgsProcessingParameterFileDestination("OUTPUT", "Road network",
-                                                         "GeoPackage (*.gpkg)"),
-                   "GeoPackage receiving every layer, in the input's CRS")]
-        for parameter, text in params:
-            if text is not None:
-                parameter.setHelp(text)
-            self.addParameter(parameter)
+        super().initAlgorithm(config)
+        output = QgsProcessingParameterFileDestination("OUTPUT", "Road network",
+                                                       "GeoPackage (*.gpkg)")
+        output.setHelp("GeoPackage receiving every layer, in the input's CRS")
+        self.addParameter(output)
         for name, text in (("ROADS", "number of roads"), ("LENGTH_M", "total road length"),
                            ("JUNCTIONS", "number of junctions")):
             self.addOutput(QgsProcessingOutputNumber(name, text))
@@ -315,6 +326,40 @@ class ExternalRibbonSnakeRoads(_ExternalRoadNetwork):
             "--workers", str(self.parameterAsInt(parameters, "WORKERS", context))]
 
 
+class ExternalSyntheticScene(_ExternalAlgorithm):
+    """Synthetic road scene through ``gisroads synth``."""
+
+    NAME, DISPLAY_NAME, GROUP = "syntheticroadscene", "Synthetic road scene", "Test data"
+    SUBCOMMAND = "synth"
+    HELP = ("Generates a suburban scene with exact ground truth (roads 4-25 m wide, junctions "
+            "of every kind, kerbs, parking lots, buildings, trees, cars, a bridge), to try "
+            "and measure the road extraction algorithms")
+    OUTPUT_HELP = ("Output folder: truth.gpkg, cloud.laz, image.tif and dsm.tif; the truth, "
+                   "image and DSM are added to the project.")
+    #: ``gisroads synth``'s defaults (a test compares them with the in-process algorithm's).
+    SIZE_M, DENSITY_PER_M2, PIXEL_M = (400.0, 400.0), 10.0, 0.25
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        add_scene_parameters(self, self.SIZE_M, self.DENSITY_PER_M2, self.PIXEL_M)
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        folder = self.parameterAsString(parameters, "OUTPUT_FOLDER", context)
+
+        def number(name):
+            return f"{self.parameterAsDouble(parameters, name, context):g}"
+
+        paths = run_external(self.executable, [
+            self.SUBCOMMAND, "-o", folder,
+            "--size", f"{number('WIDTH')}x{number('HEIGHT')}",
+            "--seed", str(self.parameterAsInt(parameters, "SEED", context)),
+            "--density", number("DENSITY"), "--pixel", number("PIXEL"),
+            *([] if self.parameterAsBool(parameters, "WRITE_CLOUD", context)
+              else ["--no-cloud"]),
+            *([] if self.parameterAsBool(parameters, "WRITE_IMAGE", context)
+              else ["--no-image"])], feedback)
+        return load_scene_on_completion(context, paths, folder)
+
+
 class ExternalProvider(QgsProcessingProvider):
     """The gisroads provider in external-tool mode (same id: models and scripts that name
     ``gisroads:lidarroadnetwork`` work in both modes). Without an executable it holds *Set
@@ -349,5 +394,6 @@ class ExternalProvider(QgsProcessingProvider):
 
 
 EXTERNAL_ALGORITHMS = (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork,
-                       ExternalRoadRasterToNetwork, ExternalRibbonSnakeRoads)
+                       ExternalRoadRasterToNetwork, ExternalRibbonSnakeRoads,
+                       ExternalSyntheticScene)
 """The algorithms that run through the external ``gisroads``: same ids as in-process."""

@@ -125,3 +125,22 @@ def load_beneath_on_completion(context, source: str, what: str, *, title: str) -
     context.addLayerToLoadOnCompletion(
         source, QgsProcessingContext.LayerDetails(f"{title} – {what}", project, what))
     on_load(context, source, PlaceBeneath(f"{title} – "))
+
+
+def load_scene_on_completion(context, paths: dict, folder: str) -> dict:
+    """Add a synthetic scene's truth (road polygons, centre lines, junctions) and its image
+    and DSM to the project when the algorithm ends; returns the algorithm's outputs.
+    ``paths``: what ``gisroads synth`` wrote (``truth``, optionally ``cloud``, ``image``,
+    ``dsm``)."""
+    truth = str(paths["truth"])
+    load_geopackage_on_completion(context, truth, ("road_polygons", "road_centrelines",
+                                                   "junctions"), group="truth")
+    outputs = {"TRUTH": truth, "TRUTH_CENTRELINES": f"{truth}|layername=road_centrelines",
+               "CLOUD": str(paths.get("cloud", "")), "OUTPUT_FOLDER": folder}
+    for key in ("IMAGE", "DSM"):
+        if key.lower() in paths:
+            outputs[key] = str(paths[key.lower()])
+            context.addLayerToLoadOnCompletion(
+                outputs[key], QgsProcessingContext.LayerDetails(key.lower(), context.project(),
+                                                                key))
+    return outputs

@@ -3,9 +3,12 @@ stage numbers in the toolbox and the decimals of number parameters."""
 import math
 import re
 
-from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutputNumber,
+from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutputFile,
+                       QgsProcessingOutputNumber, QgsProcessingOutputRasterLayer,
+                       QgsProcessingOutputVectorLayer, QgsProcessingParameterBoolean,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
-                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber)
+                       QgsProcessingParameterFileDestination,
+                       QgsProcessingParameterFolderDestination, QgsProcessingParameterNumber)
 from qgis.PyQt.QtCore import QCoreApplication
 
 
@@ -153,3 +156,46 @@ def background_output(tr) -> QgsProcessingParameterFileDestination:
                      "records no intensity), added to the project beneath the roads; a "
                      "temporary file unless saved"))
     return param
+
+
+def add_scene_parameters(algorithm, size_m, density_per_m2: float, pixel_m: float) -> None:
+    """The parameters and outputs of *Synthetic road scene* (in-process and external), with
+    the defaults of ``gisroads synth``."""
+    tr = QCoreApplication.translate
+    double = QgsProcessingParameterNumber.Double
+    params = [
+        (QgsProcessingParameterNumber("WIDTH", tr("gisroads", "Scene width (metres)"), double,
+                                      size_m[0], minValue=300.0, maxValue=5000.0),
+         "east-west extent of the scene"),
+        (QgsProcessingParameterNumber("HEIGHT", tr("gisroads", "Scene height (metres)"), double,
+                                      size_m[1], minValue=300.0, maxValue=5000.0),
+         "north-south extent of the scene"),
+        (QgsProcessingParameterNumber("SEED", tr("gisroads", "Random seed"),
+                                      QgsProcessingParameterNumber.Integer, 0, minValue=0),
+         "the same seed always gives the same scene"),
+        (QgsProcessingParameterNumber("DENSITY", tr("gisroads", "Point density (points/m²)"),
+                                      double, density_per_m2, minValue=0.1, maxValue=200.0),
+         "mean number of LiDAR points per square metre"),
+        (QgsProcessingParameterNumber("PIXEL", tr("gisroads", "Image pixel size (metres)"),
+                                      double, pixel_m, minValue=0.05, maxValue=5.0),
+         "ground size of an orthoimage and DSM pixel"),
+        (QgsProcessingParameterBoolean("WRITE_CLOUD", tr("gisroads", "Write the point cloud"),
+                                       True),
+         "cloud.laz, LAS 1.4 point format 6, in the scene's CRS"),
+        (QgsProcessingParameterBoolean("WRITE_IMAGE",
+                                       tr("gisroads", "Write the image and DSM"), True),
+         "image.tif (R, G, B, NIR, 8 bit) and dsm.tif (float, metres)"),
+        (QgsProcessingParameterFolderDestination("OUTPUT_FOLDER",
+                                                 tr("gisroads", "Output folder")),
+         "folder that receives truth.gpkg, cloud.laz, image.tif and dsm.tif"),
+    ]
+    for param, text in params:
+        param.setHelp(tr("gisroads", text))
+        algorithm.addParameter(param)
+    for output in (QgsProcessingOutputVectorLayer("TRUTH_CENTRELINES",
+                                                  tr("gisroads", "Truth road centre lines")),
+                   QgsProcessingOutputFile("TRUTH", tr("gisroads", "Truth GeoPackage")),
+                   QgsProcessingOutputFile("CLOUD", tr("gisroads", "Point cloud (LAZ)")),
+                   QgsProcessingOutputRasterLayer("IMAGE", tr("gisroads", "Orthoimage")),
+                   QgsProcessingOutputRasterLayer("DSM", tr("gisroads", "Surface model"))):
+        algorithm.addOutput(output)

@@ -1,15 +1,9 @@
 """Synthetic road scene: a point cloud, an orthoimage and DSM, with their exact road truth."""
-from qgis.core import (QgsProcessingOutputFile, QgsProcessingOutputRasterLayer,
-                       QgsProcessingOutputVectorLayer, QgsProcessingParameterBoolean,
-                       QgsProcessingParameterFolderDestination, QgsProcessingParameterNumber,
-                       QgsProcessingContext)
-
-from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import stage_default, synth_job
 
 from ..convert import gisroads_errors, progress_callback
-from ..loading import load_geopackage_on_completion
-from .base import GisroadsAlgorithm
+from ..loading import load_scene_on_completion
+from .base import GisroadsAlgorithm, add_scene_parameters
 
 
 class SyntheticRoadScene(GisroadsAlgorithm):
@@ -29,42 +23,9 @@ class SyntheticRoadScene(GisroadsAlgorithm):
         "scene.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        double = QgsProcessingParameterNumber.Double
-        size = stage_default(synth_job, "size_m")
-        params = [
-            QgsProcessingParameterNumber("WIDTH", self.tr("Scene width (metres)"), double,
-                                         size[0], minValue=300.0, maxValue=5000.0),
-            QgsProcessingParameterNumber("HEIGHT", self.tr("Scene height (metres)"), double,
-                                         size[1], minValue=300.0, maxValue=5000.0),
-            QgsProcessingParameterNumber("SEED", self.tr("Random seed"),
-                                         QgsProcessingParameterNumber.Integer, 0, minValue=0),
-            QgsProcessingParameterNumber("DENSITY", self.tr("Point density (points/m²)"),
-                                         double, stage_default(synth_job, "density_per_m2"),
-                                         minValue=0.1, maxValue=200.0),
-            QgsProcessingParameterNumber("PIXEL", self.tr("Image pixel size (metres)"),
-                                         double, stage_default(synth_job, "pixel_m"),
-                                         minValue=0.05, maxValue=5.0),
-            QgsProcessingParameterBoolean("WRITE_CLOUD", self.tr("Write the point cloud"), True),
-            QgsProcessingParameterBoolean("WRITE_IMAGE", self.tr("Write the image and DSM"),
-                                          True),
-            QgsProcessingParameterFolderDestination("OUTPUT_FOLDER", self.tr("Output folder")),
-        ]
-        helps = ["east-west extent of the scene", "north-south extent of the scene",
-                 "the same seed always gives the same scene",
-                 "mean number of LiDAR points per square metre",
-                 "ground size of an orthoimage and DSM pixel",
-                 "cloud.laz, LAS 1.4 point format 6, in the scene's CRS",
-                 "image.tif (R, G, B, NIR, 8 bit) and dsm.tif (float, metres)",
-                 "folder that receives truth.gpkg, cloud.laz, image.tif and dsm.tif"]
-        for param, text in zip(params, helps):
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
-        self.addOutput(QgsProcessingOutputVectorLayer("TRUTH_CENTRELINES",
-                                                      self.tr("Truth road centre lines")))
-        self.addOutput(QgsProcessingOutputFile("TRUTH", self.tr("Truth GeoPackage")))
-        self.addOutput(QgsProcessingOutputFile("CLOUD", self.tr("Point cloud (LAZ)")))
-        self.addOutput(QgsProcessingOutputRasterLayer("IMAGE", self.tr("Orthoimage")))
-        self.addOutput(QgsProcessingOutputRasterLayer("DSM", self.tr("Surface model")))
+        add_scene_parameters(self, stage_default(synth_job, "size_m"),
+                             stage_default(synth_job, "density_per_m2"),
+                             stage_default(synth_job, "pixel_m"))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         folder = self.parameterAsString(parameters, "OUTPUT_FOLDER", context)
@@ -79,15 +40,4 @@ class SyntheticRoadScene(GisroadsAlgorithm):
                 cloud=self.parameterAsBool(parameters, "WRITE_CLOUD", context),
                 image=self.parameterAsBool(parameters, "WRITE_IMAGE", context),
                 progress=progress_callback(feedback))
-        truth = str(paths["truth"])
-        load_geopackage_on_completion(context, truth, (POLYGONS, CENTRELINES, JUNCTIONS),
-                                      group="truth")
-        outputs = {"TRUTH": truth, "TRUTH_CENTRELINES": f"{truth}|layername={CENTRELINES}",
-                   "CLOUD": str(paths.get("cloud", "")), "OUTPUT_FOLDER": folder}
-        for key in ("IMAGE", "DSM"):
-            if key.lower() in paths:
-                outputs[key] = str(paths[key.lower()])
-                context.addLayerToLoadOnCompletion(
-                    outputs[key], QgsProcessingContext.LayerDetails(key.lower(),
-                                                                    context.project(), key))
-        return outputs
+        return load_scene_on_completion(context, paths, folder)
