@@ -24,7 +24,8 @@ from pathlib import Path
 
 from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingOutputNumber, QgsProcessingParameterEnum,
-                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
+                       QgsProcessingParameterFile,
                        QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterLayer, QgsProcessingProvider, QgsSettings)
 
@@ -360,6 +361,72 @@ class ExternalSyntheticScene(_ExternalAlgorithm):
         return load_scene_on_completion(context, paths, folder)
 
 
+class ExternalTrainRoadModel(_ExternalAlgorithm):
+    """Train road model through ``gisroads train``; the road layer, any layer of the
+    project, goes to it as a temporary GeoPackage."""
+
+    NAME, DISPLAY_NAME, GROUP = "trainroadmodel", "Train road model", "Imagery"
+    SUBCOMMAND = "train"
+    HELP = ("Trains the imagery road model on your image with your road layer as labels "
+            "(.npz: boosted trees; .onnx: fine-tunes the convolutional network, which needs "
+            "the command's environment to have PyTorch: pip install 'gisroads[train]')")
+    OUTPUT_HELP = "Output: the model file, for the Imagery road network's model."
+    #: ``gisroads train``'s defaults (a test compares them with the in-process algorithm's).
+    WIDTH_M, GUARD_M, SAMPLES, STEPS = 6.0, 5.0, 100000, 150
+
+    def parameters(self):
+        double, integer = (QgsProcessingParameterNumber.Double,
+                           QgsProcessingParameterNumber.Integer)
+        return [
+            (QgsProcessingParameterRasterLayer("IMAGE", "Aerial image"),
+             "RGB or panchromatic image; the layer's file is what is read"),
+            (QgsProcessingParameterFeatureSource("ROADS", "Road layer",
+                                                 [QgsProcessing.TypeVectorLine]),
+             "road centre lines over the image, any CRS; they need not be complete"),
+            (QgsProcessingParameterField("WIDTH_FIELD", "Road width field", None, "ROADS",
+                                         QgsProcessingParameterField.Numeric, optional=True),
+             "field holding each road's width in metres"),
+            (QgsProcessingParameterNumber("WIDTH", "Road width (metres)", double, self.WIDTH_M,
+                                          minValue=0.5, maxValue=100.0),
+             "width of the roads without a width field value"),
+            (QgsProcessingParameterNumber("GUARD", "Guard band (metres)", double, self.GUARD_M,
+                                          minValue=0.0, maxValue=50.0),
+             "no non-road sample within this distance of a road's edge"),
+            (QgsProcessingParameterNumber("SAMPLES", "Samples", integer, self.SAMPLES,
+                                          minValue=1000),
+             "boosted trees (.npz) only: pixels sampled from the image, half of them road"),
+            (QgsProcessingParameterNumber("STEPS", "Fine-tuning steps", integer, self.STEPS,
+                                          minValue=1),
+             "network (.onnx) only: optimiser steps of 8 crops"),
+            (QgsProcessingParameterFileDestination(
+                "OUTPUT", "Road model", "Road network (*.onnx);;Boosted trees (*.npz)"),
+             "the model: .onnx fine-tunes the convolutional network, .npz trains boosted "
+             "trees"),
+        ]
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        super().initAlgorithm(config)
+        self.addOutput(QgsProcessingOutputNumber("SAMPLES_USED", "Samples used (boosted trees)"))
+        self.addOutput(QgsProcessingOutputNumber("ROAD_SHARE", "Road share of the layer"))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
+        if not out.lower().endswith((".npz", ".onnx")):
+            out += ".onnx"
+        roads = self.parameterAsCompatibleSourceLayerPath(parameters, "ROADS", context,
+                                                          ["gpkg"], "gpkg", feedback)
+        field = self.parameterAsString(parameters, "WIDTH_FIELD", context)
+        result = run_external(self.executable, [
+            self.SUBCOMMAND, self.parameterAsRasterLayer(parameters, "IMAGE", context).source(),
+            roads, "-o", out, *(["--width-field", field] if field else []),
+            "--width", str(self.parameterAsDouble(parameters, "WIDTH", context)),
+            "--guard", str(self.parameterAsDouble(parameters, "GUARD", context)),
+            "--samples", str(self.parameterAsInt(parameters, "SAMPLES", context)),
+            "--steps", str(self.parameterAsInt(parameters, "STEPS", context))], feedback)
+        return {"OUTPUT": result["model"], "SAMPLES_USED": result.get("samples", 0),
+                "ROAD_SHARE": result["road_share"]}
+
+
 class ExternalProvider(QgsProcessingProvider):
     """The gisroads provider in external-tool mode (same id: models and scripts that name
     ``gisroads:lidarroadnetwork`` work in both modes). Without an executable it holds *Set
@@ -395,5 +462,5 @@ class ExternalProvider(QgsProcessingProvider):
 
 EXTERNAL_ALGORITHMS = (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork,
                        ExternalRoadRasterToNetwork, ExternalRibbonSnakeRoads,
-                       ExternalSyntheticScene)
+                       ExternalSyntheticScene, ExternalTrainRoadModel)
 """The algorithms that run through the external ``gisroads``: same ids as in-process."""

@@ -143,7 +143,8 @@ def test_without_a_gisroads_command_the_bar_offers_the_set_up(qgis_app, qgis_ifa
         assert sorted(a.id() for a in plugin.provider.algorithms()) == [
             "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
             "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork",
-            "gisroads:setupgisroads", "gisroads:syntheticroadscene"]
+            "gisroads:setupgisroads", "gisroads:syntheticroadscene",
+            "gisroads:trainroadmodel"]
         assert registry.algorithmById("gisroads:lidarroadnetwork").executable == (
             "/opt/gisroads-env/bin/gisroads")
         assert not [i for i in qgis_iface.messageBar().items() if i.title() == "gisroads"]
@@ -228,7 +229,7 @@ def test_external_mode_runs_the_lidar_pipeline_through_gisroads(external_qgis_pr
     assert re.findall(r"^\s*(gisroads:\S+)", listed.stdout, flags=re.M) == [
         "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
         "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork", "gisroads:setupgisroads",
-        "gisroads:syntheticroadscene"]
+        "gisroads:syntheticroadscene", "gisroads:trainroadmodel"]
     out = tmp_path / "fusa.gpkg"
     done = external_qgis_process("--json", "run", "gisroads:lidarroadnetwork", "--",
                                  f"INPUT={lidar_dir / 'fusa.laz'}", f"OUTPUT={out}")
@@ -419,3 +420,31 @@ def test_external_algorithms_have_their_in_process_twins_parameters(run_algorith
                                                                       parameter.name())
             assert bool(parameter.flags() & parameter.FlagOptional) == bool(
                 other.flags() & other.FlagOptional), (cls.NAME, parameter.name())
+
+
+def test_external_and_in_process_training_give_the_same_model(run_algorithm, scene_dir,
+                                                              tmp_path):
+    """Train road model through the external command: the road layer goes to it as a file,
+    and the boosted trees it trains are the in-process algorithm's (same samples, same
+    road share, same probabilities)."""
+    import numpy as np
+    from qgis.core import QgsProcessingContext, QgsProcessingFeedback
+
+    from gisroads.learn.model import load_model
+    from processing_provider.external import ExternalTrainRoadModel
+
+    params = {"IMAGE": str(scene_dir / "image.tif"),
+              "ROADS": f"{scene_dir / 'truth.gpkg'}|layername=road_centrelines",
+              "WIDTH_FIELD": "width_m", "SAMPLES": 4000}
+    in_process = run_algorithm("trainroadmodel", {**params, "OUTPUT": str(tmp_path / "a.npz")})
+    algorithm = ExternalTrainRoadModel(external_gisroads())
+    algorithm.initAlgorithm()
+    context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
+    external_params = {**params, "OUTPUT": str(tmp_path / "b.npz")}
+    assert algorithm.prepare(external_params, context, feedback)
+    external = algorithm.runPrepared(external_params, context, feedback)
+    assert external["SAMPLES_USED"] == in_process["SAMPLES_USED"] > 0
+    assert external["ROAD_SHARE"] == pytest.approx(in_process["ROAD_SHARE"])
+    a, b = load_model(tmp_path / "a.npz"), load_model(tmp_path / "b.npz")
+    np.testing.assert_array_equal(a.threshold, b.threshold)
+    np.testing.assert_array_equal(a.value, b.value)

@@ -189,5 +189,6 @@ def test_a_stock_qgis_sets_gisroads_up_and_then_lists_its_algorithms(stock_qgis_
     after = stock_qgis_process("list")
     assert _listed(after) == ["gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
                               "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork",
-                              "gisroads:setupgisroads", "gisroads:syntheticroadscene"]
+                              "gisroads:setupgisroads", "gisroads:syntheticroadscene",
+                              "gisroads:trainroadmodel"]
     assert "setupgisroads" not in after.stderr  # no set-up message any more
