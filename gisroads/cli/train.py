@@ -6,6 +6,7 @@ from .report import ProgressBar, print_result
 
 
 def add_parser(subparsers) -> None:
+    from ..learn.convnet import FINE_TUNE_STEPS
     p = add_command(
         subparsers, "train", run, "train a road model on an image from a road layer",
         "Train the learned road cue on your own image from an existing road layer over "
@@ -28,7 +29,8 @@ def add_parser(subparsers) -> None:
                         "bundled one)")
     p.add_argument("--steps", type=int,
                    help="with an .onnx output: optimiser steps of 8 crops (default "
-                        "150: about two minutes for a 1500 x 1500 tile on two cores)")
+                        f"{FINE_TUNE_STEPS}: about a minute for a 1500 x 1500 tile on two "
+                        "cores)")
     _add_sample_options(p)
     add_georeferencing_options(p, "an image")
 

@@ -122,17 +122,22 @@ def test_the_stand_in_plugin_shows_one_message_bar_item(qgis_app):
     assert iface.bar.pushed == [("gisroads", unmet.what, unmet.fix, Qgis.Critical, 0)]
 
 
-def test_without_a_gisroads_command_the_bar_offers_the_set_up(qgis_app, qgis_iface):
-    from qgis.core import QgsApplication
+def test_without_a_gisroads_command_the_bar_offers_the_set_up(qgis_app, qgis_iface,
+                                                              monkeypatch):
+    from qgis.core import QgsProcessingRegistry
     from qgis.PyQt.QtWidgets import QPushButton
 
+    from processing_provider import plugin as plugin_module
     from processing_provider.plugin import ExternalPlugin
 
+    # a registry of its own: the suite's in-process provider holds the id "gisroads"
+    registry = QgsProcessingRegistry()
+    monkeypatch.setattr(plugin_module, "QgsApplication",
+                        type("App", (), {"processingRegistry": staticmethod(lambda: registry)}))
     unmet = missing_message(["shapely>=2.0 (found 1.8.5)"])
     plugin = ExternalPlugin(qgis_iface, unmet, None)
     plugin.initGui()
     try:
-        registry = QgsApplication.processingRegistry()
         assert [a.id() for a in plugin.provider.algorithms()] == ["gisroads:setupgisroads"]
         (item,) = [i for i in qgis_iface.messageBar().items() if i.title() == "gisroads"]
         assert item.text() == unmet.what
