@@ -75,8 +75,10 @@ class ExternalPlugin(UnavailablePlugin):
             QgsMessageLog.logMessage(self.note(), "gisroads", Qgis.Info)
 
     def note(self) -> str:
-        return (f"gisroads: the LiDAR and imagery road networks run through the external "
-                f"{self.executable}; the other algorithms need, in QGIS's Python, "
+        from .external import EXTERNAL_ALGORITHMS
+        names = ", ".join(a.DISPLAY_NAME for a in EXTERNAL_ALGORITHMS)
+        return (f"gisroads: {names} run through the external {self.executable}; the other "
+                f"algorithms need, in QGIS's Python, "
                 f"{self.unmet.what.split(' lacks ', 1)[-1]}")
 
     def initGui(self):  # noqa: N802

@@ -153,6 +153,9 @@ def test_without_a_gisroads_command_the_bar_offers_the_set_up(qgis_app, qgis_ifa
         assert registry.algorithmById("gisroads:lidarroadnetwork").executable == (
             "/opt/gisroads-env/bin/gisroads")
         assert not [i for i in qgis_iface.messageBar().items() if i.title() == "gisroads"]
+        assert plugin.note().startswith("gisroads: LiDAR road network (Zhu & Mordohai), ")
+        assert "Train road model run through the external /opt/gisroads-env/bin/gisroads; "\
+               "the other algorithms need, in QGIS's Python, shapely>=2.0" in plugin.note()
     finally:
         plugin.unload()
 
