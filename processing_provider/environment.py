@@ -15,10 +15,12 @@ from __future__ import annotations
 
 import json
 import os
+import queue
 import re
 import shutil
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 #: Folder of the environment inside the QGIS profile folder.
@@ -85,31 +87,42 @@ def bundled_wheel(plugin_folder) -> Path | None:
 def _stream(command, *, progress, cancelled, share: tuple[float, float], expected: int,
             env) -> tuple[int, list[str]]:
     """Run ``command``, reporting progress within ``share`` from the packages pip names
-    (``expected`` of them fill it); returns its exit status and its output lines. A cancel
-    terminates it and raises SetupError."""
+    (``expected`` of them fill it); returns its exit status and its output lines. A cancel,
+    polled twice a second even while pip is silent (a large download), terminates it and
+    raises SetupError."""
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                text=True, env=env)
-    lines, seen = [], 0
-    try:
+    output: queue.Queue = queue.Queue()
+
+    def read():
         for line in process.stdout:
+            output.put(line)
+        output.put(None)
+
+    threading.Thread(target=read, daemon=True).start()
+    lines, seen, finished = [], 0, False
+    try:
+        while not cancelled():
+            try:
+                line = output.get(timeout=0.5)
+            except queue.Empty:
+                continue
+            if line is None:
+                finished = True
+                break
             line = line.rstrip()
             if not line:
                 continue
             lines.append(line)
-            if cancelled():
-                process.terminate()
-                break
             if line.startswith(("Collecting ", "Processing ")):
                 seen += 1
                 progress(share[0] + (share[1] - share[0]) * min(seen / expected, 1.0), line)
             elif line.startswith("Installing collected packages"):
                 progress(share[1], "installing the packages")
-        status = process.wait()
     finally:
-        if process.poll() is None:
-            process.kill()
-            process.wait()
-        process.stdout.close()
+        if not finished and process.poll() is None:
+            process.terminate()
+        status = process.wait()
     if cancelled():
         raise SetupError("cancelled")
     return status, lines
@@ -146,8 +159,12 @@ def create_environment(folder, wheel, *, python=None, progress=None, cancelled=N
         raise SetupError(f"{wheel}: no gisroads wheel to install (reinstall the plugin from "
                          "its ZIP, which carries one)")
     python = Path(python) if python is not None else interpreter()
-    found = subprocess.run([str(python), "-c", "import sys; print(*sys.version_info[:2])"],
-                           capture_output=True, text=True)
+    try:
+        found = subprocess.run([str(python), "-c", "import sys; print(*sys.version_info[:2])"],
+                               capture_output=True, text=True)
+    except OSError as error:
+        raise SetupError(f"{python} does not run ({error.strerror}): name an existing "
+                         "gisroads command in the QGIS setting gisroads/executable") from None
     version = tuple(int(v) for v in found.stdout.split()) if found.returncode == 0 else ()
     if version < MIN_PYTHON:
         raise SetupError(

@@ -8,12 +8,14 @@ import json
 import os
 import re
 import subprocess
+import sys
+import time
 import zipfile
 from pathlib import Path
 
 import pytest
 
-from processing_provider.environment import (STAMP, SetupError, bundled_wheel,
+from processing_provider.environment import (STAMP, SetupError, _stream, bundled_wheel,
                                              create_environment, interpreter,
                                              ready_executable)
 
@@ -112,6 +114,16 @@ def test_a_cancelled_set_up_leaves_nothing(local_index, tmp_path):
     assert not folder.exists()
 
 
+def test_a_cancel_stops_pip_while_it_is_silent():
+    """A cancel is seen within a second even while pip prints nothing (a large download)."""
+    started = time.monotonic()
+    with pytest.raises(SetupError, match="cancelled"):
+        _stream([sys.executable, "-c", "import time; time.sleep(60)"],
+                progress=lambda f, m: None, share=(0.1, 0.9), expected=1, env=None,
+                cancelled=lambda: time.monotonic() - started > 1.0)
+    assert time.monotonic() - started < 3.0
+
+
 def _fake_python(folder: Path, version: str, venv_error: str | None = None) -> Path:
     """An executable standing in for a Python: says its version, fails ``-m venv``."""
     script = folder / "python"
@@ -136,6 +148,8 @@ def test_an_old_python_or_one_without_venv_is_named_with_the_fix(local_index, tm
     assert not (tmp_path / "c").exists()
     with pytest.raises(SetupError, match="no gisroads wheel"):
         create_environment(tmp_path / "d", tmp_path / "none.whl")
+    with pytest.raises(SetupError, match="does not run"):
+        create_environment(tmp_path / "e", local_index, python=tmp_path / "no-python")
 
 
 def test_the_plugin_zip_carries_the_gisroads_wheel(plugin_zip, tmp_path):
