@@ -7,6 +7,8 @@ loads layers without their stored default style, so a post-processor loads it.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 from qgis.core import (QgsProcessingContext, QgsProcessingLayerPostProcessorInterface,
                        QgsVectorLayer)
 
@@ -27,7 +29,8 @@ LAYER_TITLES = {"road_centrelines": "road centre lines", "road_polygons": "road 
 
 class ApplyStyle(QgsProcessingLayerPostProcessorInterface):
     """Styles an output layer when QGIS loads it (with a QML file, or the default style
-    stored with the layer) and leaves it unticked in the layer tree unless ``visible``."""
+    stored with the layer) and leaves it unticked, its legend folded, in the layer tree
+    unless ``visible``."""
 
     def __init__(self, qml_path: str | None = None, *, visible: bool = True):
         super().__init__()
@@ -45,19 +48,25 @@ class ApplyStyle(QgsProcessingLayerPostProcessorInterface):
         node = project.layerTreeRoot().findLayer(layer.id()) if project is not None else None
         if node is not None:
             node.setItemVisibilityChecked(self.visible)
+            node.setExpanded(self.visible)  # a QA layer's legend folded away
 
 
 class PlaceBeneath(QgsProcessingLayerPostProcessorInterface):
     """Moves a raster loaded with a run's layers (its input image, a cloud's ground
     intensity) beneath them: just below the lowest layer of its group whose name starts
     with ``prefix`` (the run's layers are named after its input), above whatever was
-    there before. Layers loaded after it go on top of it anyway."""
+    there before. Layers loaded after it go on top of it anyway. Styled with
+    ``qml_path`` when given."""
 
-    def __init__(self, prefix: str):
+    def __init__(self, prefix: str, qml_path: str | None = None):
         super().__init__()
         self.prefix = prefix
+        self.qml_path = qml_path
 
     def postProcessLayer(self, layer, context, feedback):  # noqa: N802
+        if self.qml_path is not None:
+            layer.loadNamedStyle(self.qml_path)
+            layer.triggerRepaint()
         project = context.project()
         node = project.layerTreeRoot().findLayer(layer.id()) if project is not None else None
         if node is None:
@@ -124,7 +133,16 @@ def load_beneath_on_completion(context, source: str, what: str, *, title: str) -
         return
     context.addLayerToLoadOnCompletion(
         source, QgsProcessingContext.LayerDetails(f"{title} – {what}", project, what))
-    on_load(context, source, PlaceBeneath(f"{title} – "))
+    on_load(context, source, PlaceBeneath(f"{title} – ", style_path(what.replace(" ", "_"))))
+
+
+def style_path(name: str) -> str | None:
+    """The QML style ``name`` of styles/ (in the plugin: gisroads/_styles), None if none."""
+    here = Path(__file__).resolve().parent
+    for folder in (here / "gisroads" / "_styles", here.parent / "styles"):
+        if (folder / f"{name}.qml").is_file():
+            return str(folder / f"{name}.qml")
+    return None
 
 
 def load_scene_on_completion(context, paths: dict, folder: str) -> dict:

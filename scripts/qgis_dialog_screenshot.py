@@ -4,16 +4,19 @@ Run by ``scripts/qgis_dialog_screenshot.sh`` inside ``qgis --code`` under Xvfb (
 the usual way: the system Python, the plugin from its zip in a throwaway profile), so what a
 user sees can be looked at on a machine without a display. Settings come from the
 environment: ``SHOT_ALGORITHM`` (e.g. ``gisroads:lidarroadnetwork``), ``SHOT_PARAMETERS`` (a
-JSON object) and ``SHOT_DIR`` (where ``dialog.png``, ``dialog_after_run.png`` and
-``shot.log`` go).
+JSON object) and ``SHOT_DIR`` (where ``dialog.png``, ``window_before_run.png`` (the main
+window with its message bar), ``dialog_after_run.png``,
+``window_after_run.png`` (the main window: the layers the run loaded, on the map and in the
+layer tree) and ``shot.log`` go).
 """
 import json
 import os
 from pathlib import Path
 
 import processing
-from qgis.core import QgsApplication
+from qgis.core import QgsApplication, QgsProject
 from qgis.PyQt.QtCore import QTimer
+from qgis.utils import iface
 
 OUT = Path(os.environ["SHOT_DIR"])
 ALGORITHM = os.environ["SHOT_ALGORITHM"]
@@ -38,12 +41,25 @@ def _open_dialog() -> None:
 
     def after_run(successful: bool, results: dict) -> None:
         _log(f"finished: {successful}, results: {results}")
-        # let the dialog show the end of its log first
-        QTimer.singleShot(1000, lambda: (dialog.grab().save(str(OUT / "dialog_after_run.png")),
-                                         QgsApplication.exit(0 if successful else 1)))
+        # let the dialog show the end of its log first, then the map its layers
+        QTimer.singleShot(1000, lambda: dialog.grab().save(str(OUT / "dialog_after_run.png")))
+
+        def window() -> None:
+            dialog.close()
+            layers = QgsProject.instance().layerTreeRoot().findLayers()
+            _log("layers: " + json.dumps([[n.name(), n.itemVisibilityChecked()]
+                                          for n in layers]))
+            iface.mapCanvas().zoomToFullExtent()
+            iface.mapCanvas().refreshAllLayers()
+            QTimer.singleShot(3000, lambda: (
+                iface.mainWindow().grab().save(str(OUT / "window_after_run.png")),
+                QgsApplication.exit(0 if successful else 1)))
+
+        QTimer.singleShot(2000, window)
 
     def run() -> None:
         dialog.grab().save(str(OUT / "dialog.png"))
+        iface.mainWindow().grab().save(str(OUT / "window_before_run.png"))
         dialog.algorithmFinished.connect(after_run)
         dialog.runAlgorithm()
 

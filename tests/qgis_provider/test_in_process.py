@@ -180,6 +180,10 @@ def test_a_run_loads_its_layers_named_after_the_input_with_the_qa_layers_hidden(
     assert list(ticked)[-2:] == ["fusa – ground intensity", "basemap"]
     intensity = QgsProject.instance().mapLayersByName("fusa – ground intensity")[0]
     assert intensity.isValid() and intensity.crs() == lines_crs(tmp_path / "roads.gpkg")
+    # styles/ground_intensity.qml: grey from 0.1 to 1.2 of the bright ground's intensity
+    # (QGIS's own stretch runs to the brightest outlier, 40 times that: a black image)
+    stretch = intensity.renderer().contrastEnhancement()
+    assert (stretch.minimumValue(), stretch.maximumValue()) == (0.1, 1.2)
     lines = QgsProject.instance().mapLayersByName("fusa – road centre lines")[0]
     assert lines.featureCount() > 20
     assert lines.renderer().symbol().color().name() == "#e31a1c"  # styles/*.qml

@@ -338,14 +338,21 @@ def test_desktop_dialog_runs_the_lidar_pipeline_through_external_gisroads(plugin
     done = subprocess.run(
         [str(REPO / "scripts" / "qgis_dialog_screenshot.sh"), str(tmp_path),
          "gisroads:lidarroadnetwork",
-         json.dumps({"INPUT": str(lidar_dir / "fusa.laz"), "OUTPUT": str(out)})],
+         json.dumps({"INPUT": str(lidar_dir / "fusa.laz"), "OUTPUT": str(out),
+                     "BACKGROUND": "TEMPORARY_OUTPUT"})],
         env=env, capture_output=True, text=True, timeout=660)
     assert "algorithm: ExternalLidarRoadNetwork" in done.stdout, done.stdout + done.stderr
     assert "finished: True" in done.stdout and out.exists()
     assert "Traceback" not in done.stdout + done.stderr
-    for name in ("dialog.png", "dialog_after_run.png"):
+    for name in ("dialog.png", "window_before_run.png", "dialog_after_run.png",
+                 "window_after_run.png"):
         image = imread(tmp_path / name)
         assert image.shape[0] > 400 and image.shape[1] > 600 and image.std() > 20
+    # the dialog loaded the layers: the roads ticked over the ground intensity
+    (layers,) = [json.loads(line[len("layers: "):]) for line in done.stdout.splitlines()
+                 if line.startswith("layers: ")]
+    assert ["fusa – road centre lines", True] in layers
+    assert layers[-1] == ["fusa – ground intensity", True]
 
 
 @pytest.fixture(scope="module")
