@@ -29,7 +29,8 @@ def add_parser(subparsers) -> None:
                         "(with --cue evidence: road_evidence.tif)")
     p.add_argument("--background", type=Path,
                    help="also write a GeoTIFF to show beneath the roads: the ground intensity "
-                        "image where the cloud has intensity, else the road evidence")
+                        "image where the cloud has intensity, else the road evidence (with "
+                        "its QGIS style beside it, .qml)")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
     add_database_options(p)
 

@@ -31,6 +31,7 @@ from ..lidar.pipeline import (EVIDENCE_THRESHOLD, TiledRoads, auto_cell_m,
 from ..lidar.tagging import ground_level_heights, tag_road_points
 from ..tiling.tilestore import inputs_crs, las_inputs
 from ..progress import Progress, report, scaled
+from ..resources import styles_dir
 from .common import _layer, _warn_if_empty, _warn_if_no_road, network_summary, stage_default
 
 
@@ -55,7 +56,8 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
     ``rasters_dir`` (per-level intensity and likelihood GeoTIFFs of every tile and the
     per-level ground heights, or ``road_evidence.tif``), ``background`` (a GeoTIFF to show
     beneath the roads: the ground intensity image of the lowest level where the cloud has
-    intensity, else the road evidence; its kind in the result's ``background_kind``) and a
+    intensity, else the road evidence, with its QGIS style beside it as ``.qml``; its kind
+    in the result's ``background_kind``) and a
     ``quicklook`` PNG over the same image.
     The parameters from ``cue`` to ``work_dir`` are those of
     :func:`gisroads.lidar.pipeline.extract_roads`; ``tile_maps`` defaults to keeping the
@@ -119,7 +121,11 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
             report(progress, 0.95, "imaging the background")
             beneath, kind = _background(roads, working)
         if background is not None and beneath is not None:
-            write_geotiff(background, beneath, band_names=[kind.replace(" ", "_")])
+            style = kind.replace(" ", "_")
+            write_geotiff(background, beneath, band_names=[style])
+            # QGIS styles a raster with the .qml of the same name beside it
+            Path(background).with_suffix(".qml").write_bytes(
+                (styles_dir() / f"{style}.qml").read_bytes())
             result["background"], result["background_kind"] = Path(background), kind
         if quicklook is not None:
             report(progress, 0.97, "drawing the quick-look")

@@ -121,6 +121,7 @@ def test_lidar_writes_network_tagged_cloud_and_quicklook(tmp_path):
     # cells (0.5 m, wider for a sparse cloud)
     from gisroads.io.raster import read_raster
     assert summary["background_kind"] == "ground intensity"
+    assert 'type="singlebandgray"' in (tmp_path / "beneath.qml").read_text()  # its style
     beneath = read_raster(summary["background"])
     roads = read_layer(tmp_path / "roads.gpkg", "road_centrelines")
     assert 0.5 <= beneath.transform.a <= 1.0 and beneath.crs == roads.crs
