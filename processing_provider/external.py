@@ -427,6 +427,64 @@ class ExternalTrainRoadModel(_ExternalAlgorithm):
                 "ROAD_SHARE": result["road_share"]}
 
 
+class ExternalCityBlocks(_ExternalAlgorithm):
+    """City blocks (normalized cut) through ``gisroads blocks``."""
+
+    NAME, DISPLAY_NAME, GROUP = "cityblocks", "City blocks (normalized cut)", "LiDAR"
+    SUBCOMMAND = "blocks"
+    HELP = ("Segments a city into blocks bounded by roads (Zhu &amp; Mordohai, section 5): a "
+            "normalized cut of a graph over the non-road places, its edges weighted by the "
+            "highest road likelihood between their nodes")
+    OUTPUT_HELP = "Output: a GeoPackage with the city_blocks layer, in the raster's CRS."
+    #: ``gisroads blocks``'s defaults (a test compares them with the in-process algorithm's).
+    SPACING_M, MAX_EDGE_M = 10.0, 80.0
+
+    def parameters(self):
+        double = QgsProcessingParameterNumber.Double
+        return [
+            (QgsProcessingParameterRasterLayer("INPUT", "Road likelihood raster"),
+             "likelihood GeoTIFF of the LiDAR road network (0-25) or a road probability "
+             "(0-1), projected CRS; the layer's file is what is read"),
+            (QgsProcessingParameterFile("POINTS", "Ground points (LAS/LAZ)",
+                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)",
+                                        optional=True),
+             "optional: the cloud whose ground points are the graph's nodes"),
+            (QgsProcessingParameterNumber("BLOCKS", "Number of blocks",
+                                          QgsProcessingParameterNumber.Integer, None,
+                                          optional=True, minValue=1, maxValue=10000),
+             "normalized-cut segments; empty: chosen by the largest eigengap"),
+            (QgsProcessingParameterNumber("SPACING", "Node spacing (metres)", double,
+                                          self.SPACING_M, minValue=1.0, maxValue=100.0),
+             "distance between graph nodes; smaller is finer and slower"),
+            (QgsProcessingParameterNumber("MAX_EDGE", "Longest edge (metres)", double,
+                                          self.MAX_EDGE_M, minValue=5.0, maxValue=500.0),
+             "nodes closer than this are joined (paper: 80 m)"),
+            (QgsProcessingParameterFileDestination("OUTPUT", "City blocks",
+                                                   "GeoPackage (*.gpkg)"),
+             "GeoPackage receiving the city_blocks layer, in the raster's CRS"),
+        ]
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        super().initAlgorithm(config)
+        self.addOutput(QgsProcessingOutputNumber("N_BLOCKS", "Number of blocks"))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
+        points = self.parameterAsFile(parameters, "POINTS", context)
+        blocks = parameters.get("BLOCKS")
+        result = run_external(self.executable, [
+            self.SUBCOMMAND, self.parameterAsRasterLayer(parameters, "INPUT", context).source(),
+            "-o", out, *(["--points", points] if points else []),
+            *(["--blocks", str(self.parameterAsInt(parameters, "BLOCKS", context))]
+              if blocks not in (None, "") else []),
+            "--spacing", str(self.parameterAsDouble(parameters, "SPACING", context)),
+            "--max-edge", str(self.parameterAsDouble(parameters, "MAX_EDGE", context))],
+            feedback)
+        load_geopackage_on_completion(context, out, ("city_blocks",))
+        feedback.pushInfo(f"{result['blocks']} city blocks, {result['area_m2']:.0f} m²")
+        return {"OUTPUT": out, "N_BLOCKS": result["blocks"]}
+
+
 class ExternalProvider(QgsProcessingProvider):
     """The gisroads provider in external-tool mode (same id: models and scripts that name
     ``gisroads:lidarroadnetwork`` work in both modes). Without an executable it holds *Set
@@ -462,5 +520,5 @@ class ExternalProvider(QgsProcessingProvider):
 
 EXTERNAL_ALGORITHMS = (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork,
                        ExternalRoadRasterToNetwork, ExternalRibbonSnakeRoads,
-                       ExternalSyntheticScene, ExternalTrainRoadModel)
+                       ExternalSyntheticScene, ExternalTrainRoadModel, ExternalCityBlocks)
 """The algorithms that run through the external ``gisroads``: same ids as in-process."""

@@ -146,7 +146,7 @@ def test_without_a_gisroads_command_the_bar_offers_the_set_up(qgis_app, qgis_ifa
         # what the set-up does once it has made the environment
         plugin.provider.use("/opt/gisroads-env/bin/gisroads")
         assert sorted(a.id() for a in plugin.provider.algorithms()) == [
-            "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
+            "gisroads:cityblocks", "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
             "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork",
             "gisroads:setupgisroads", "gisroads:syntheticroadscene",
             "gisroads:trainroadmodel"]
@@ -154,7 +154,8 @@ def test_without_a_gisroads_command_the_bar_offers_the_set_up(qgis_app, qgis_ifa
             "/opt/gisroads-env/bin/gisroads")
         assert not [i for i in qgis_iface.messageBar().items() if i.title() == "gisroads"]
         assert plugin.note().startswith("gisroads: LiDAR road network (Zhu & Mordohai), ")
-        assert "Train road model run through the external /opt/gisroads-env/bin/gisroads; "\
+        assert "City blocks (normalized cut) run through the external "\
+               "/opt/gisroads-env/bin/gisroads; "\
                "the other algorithms need, in QGIS's Python, shapely>=2.0" in plugin.note()
     finally:
         plugin.unload()
@@ -235,7 +236,7 @@ def test_external_mode_runs_the_lidar_pipeline_through_gisroads(external_qgis_pr
     listed = external_qgis_process("list")
     assert "Traceback" not in listed.stdout + listed.stderr
     assert re.findall(r"^\s*(gisroads:\S+)", listed.stdout, flags=re.M) == [
-        "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
+        "gisroads:cityblocks", "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
         "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork", "gisroads:setupgisroads",
         "gisroads:syntheticroadscene", "gisroads:trainroadmodel"]
     out = tmp_path / "fusa.gpkg"
@@ -378,7 +379,7 @@ def snake_inputs(tmp_path_factory) -> dict:
 
 
 @pytest.mark.parametrize("name", ["roadrastertonetwork", "ribbonsnakeroads",
-                                  "syntheticroadscene"])
+                                  "syntheticroadscene", "cityblocks"])
 def test_external_and_in_process_algorithms_give_the_same_layers(
         name, run_and_load, mask_tif, snake_inputs, tmp_path):
     """Each algorithm that runs through the external command adds the same layers, named,
@@ -394,6 +395,8 @@ def test_external_and_in_process_algorithms_give_the_same_layers(
     for mode, algorithm in (("in-process", in_process), ("external", external)):
         out = tmp_path / mode
         inputs, lines_file = {
+            "cityblocks": ({"INPUT": str(mask_tif), "BLOCKS": 6, "SPACING": 25.0,
+                            "OUTPUT": f"{out}.gpkg"}, f"{out}.gpkg"),
             "roadrastertonetwork": ({"INPUT": str(mask_tif), "OUTPUT": f"{out}.gpkg"},
                                     f"{out}.gpkg"),
             "ribbonsnakeroads": ({**snake_inputs, "WORKERS": 1, "OUTPUT": f"{out}.gpkg"},
@@ -402,9 +405,10 @@ def test_external_and_in_process_algorithms_give_the_same_layers(
                                     "PIXEL": 1.0, "OUTPUT_FOLDER": str(out)},
                                    out / "truth.gpkg")}[name]
         ticked = run_and_load(algorithm, inputs)
-        lines = QgsVectorLayer(f"{lines_file}|layername=road_centrelines", "lines", "ogr")
+        layer = "city_blocks" if name == "cityblocks" else "road_centrelines"
+        lines = QgsVectorLayer(f"{lines_file}|layername={layer}", "lines", "ogr")
         runs[mode] = (ticked, lines.featureCount(),
-                      sum(f.geometry().length() for f in lines.getFeatures()))
+                      sum(f.geometry().length() for f in lines.getFeatures()))  # perimeters
         assert QgsProject.instance().count() == len(ticked)
     assert runs["external"][0] == runs["in-process"][0]
     assert runs["external"][1] == runs["in-process"][1] > 0

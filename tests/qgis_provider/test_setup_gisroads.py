@@ -201,7 +201,8 @@ def test_a_stock_qgis_sets_gisroads_up_and_then_lists_its_algorithms(stock_qgis_
     stamp = json.loads(Path(profile, "gisroads/environment", STAMP).read_text())
     assert stamp["python"].startswith("/usr/bin/python3")  # QGIS's own interpreter
     after = stock_qgis_process("list")
-    assert _listed(after) == ["gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
+    assert _listed(after) == ["gisroads:cityblocks", "gisroads:imageryroadnetwork",
+                              "gisroads:lidarroadnetwork",
                               "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork",
                               "gisroads:setupgisroads", "gisroads:syntheticroadscene",
                               "gisroads:trainroadmodel"]
