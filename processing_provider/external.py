@@ -24,12 +24,12 @@ from pathlib import Path
 
 from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingOutputNumber, QgsProcessingParameterEnum,
-                       QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
-                       QgsProcessingParameterFile,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
                        QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterLayer, QgsProcessingProvider, QgsSettings)
 
-from .algorithms.base import add_scene_parameters, background_output, workers_parameter
+from .algorithms.base import (add_scene_parameters, background_output, city_blocks_parameters,
+                              train_parameters, workers_parameter)
 from .environment import ready_executable
 from .loading import (load_beneath_on_completion, load_geopackage_on_completion,
                       load_scene_on_completion)
@@ -375,34 +375,7 @@ class ExternalTrainRoadModel(_ExternalAlgorithm):
     WIDTH_M, GUARD_M, SAMPLES, STEPS = 6.0, 5.0, 100000, 150
 
     def parameters(self):
-        double, integer = (QgsProcessingParameterNumber.Double,
-                           QgsProcessingParameterNumber.Integer)
-        return [
-            (QgsProcessingParameterRasterLayer("IMAGE", "Aerial image"),
-             "RGB or panchromatic image; the layer's file is what is read"),
-            (QgsProcessingParameterFeatureSource("ROADS", "Road layer",
-                                                 [QgsProcessing.TypeVectorLine]),
-             "road centre lines over the image, any CRS; they need not be complete"),
-            (QgsProcessingParameterField("WIDTH_FIELD", "Road width field", None, "ROADS",
-                                         QgsProcessingParameterField.Numeric, optional=True),
-             "field holding each road's width in metres"),
-            (QgsProcessingParameterNumber("WIDTH", "Road width (metres)", double, self.WIDTH_M,
-                                          minValue=0.5, maxValue=100.0),
-             "width of the roads without a width field value"),
-            (QgsProcessingParameterNumber("GUARD", "Guard band (metres)", double, self.GUARD_M,
-                                          minValue=0.0, maxValue=50.0),
-             "no non-road sample within this distance of a road's edge"),
-            (QgsProcessingParameterNumber("SAMPLES", "Samples", integer, self.SAMPLES,
-                                          minValue=1000),
-             "boosted trees (.npz) only: pixels sampled from the image, half of them road"),
-            (QgsProcessingParameterNumber("STEPS", "Fine-tuning steps", integer, self.STEPS,
-                                          minValue=1),
-             "network (.onnx) only: optimiser steps of 8 crops"),
-            (QgsProcessingParameterFileDestination(
-                "OUTPUT", "Road model", "Road network (*.onnx);;Boosted trees (*.npz)"),
-             "the model: .onnx fine-tunes the convolutional network, .npz trains boosted "
-             "trees"),
-        ]
+        return train_parameters(str, self.WIDTH_M, self.GUARD_M, self.SAMPLES, self.STEPS)
 
     def initAlgorithm(self, config=None):  # noqa: N802
         super().initAlgorithm(config)
@@ -440,29 +413,7 @@ class ExternalCityBlocks(_ExternalAlgorithm):
     SPACING_M, MAX_EDGE_M = 10.0, 80.0
 
     def parameters(self):
-        double = QgsProcessingParameterNumber.Double
-        return [
-            (QgsProcessingParameterRasterLayer("INPUT", "Road likelihood raster"),
-             "likelihood GeoTIFF of the LiDAR road network (0-25) or a road probability "
-             "(0-1), projected CRS; the layer's file is what is read"),
-            (QgsProcessingParameterFile("POINTS", "Ground points (LAS/LAZ)",
-                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)",
-                                        optional=True),
-             "optional: the cloud whose ground points are the graph's nodes"),
-            (QgsProcessingParameterNumber("BLOCKS", "Number of blocks",
-                                          QgsProcessingParameterNumber.Integer, None,
-                                          optional=True, minValue=1, maxValue=10000),
-             "normalized-cut segments; empty: chosen by the largest eigengap"),
-            (QgsProcessingParameterNumber("SPACING", "Node spacing (metres)", double,
-                                          self.SPACING_M, minValue=1.0, maxValue=100.0),
-             "distance between graph nodes; smaller is finer and slower"),
-            (QgsProcessingParameterNumber("MAX_EDGE", "Longest edge (metres)", double,
-                                          self.MAX_EDGE_M, minValue=5.0, maxValue=500.0),
-             "nodes closer than this are joined (paper: 80 m)"),
-            (QgsProcessingParameterFileDestination("OUTPUT", "City blocks",
-                                                   "GeoPackage (*.gpkg)"),
-             "GeoPackage receiving the city_blocks layer, in the raster's CRS"),
-        ]
+        return city_blocks_parameters(str, self.SPACING_M, self.MAX_EDGE_M)
 
     def initAlgorithm(self, config=None):  # noqa: N802
         super().initAlgorithm(config)

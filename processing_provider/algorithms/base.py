@@ -6,9 +6,10 @@ import re
 from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutputFile,
                        QgsProcessingOutputNumber, QgsProcessingOutputRasterLayer,
                        QgsProcessingOutputVectorLayer, QgsProcessingParameterBoolean,
-                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
-                       QgsProcessingParameterFileDestination,
-                       QgsProcessingParameterFolderDestination, QgsProcessingParameterNumber)
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
+                       QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
+                       QgsProcessingParameterFolderDestination, QgsProcessingParameterNumber,
+                       QgsProcessingParameterRasterLayer)
 from qgis.PyQt.QtCore import QCoreApplication
 
 
@@ -199,3 +200,73 @@ def add_scene_parameters(algorithm, size_m, density_per_m2: float, pixel_m: floa
                    QgsProcessingOutputRasterLayer("IMAGE", tr("gisroads", "Orthoimage")),
                    QgsProcessingOutputRasterLayer("DSM", tr("gisroads", "Surface model"))):
         algorithm.addOutput(output)
+
+def city_blocks_parameters(tr, spacing_m: float, max_edge_m: float) -> list:
+    """``(parameter, help)`` of *City blocks* (in-process and external), with the defaults
+    of ``gisroads blocks``."""
+    double = QgsProcessingParameterNumber.Double
+    return [
+        (QgsProcessingParameterRasterLayer("INPUT", tr("Road likelihood raster")),
+         "likelihood GeoTIFF of the LiDAR road network (0-25) or a road probability "
+         "(0-1), projected CRS"),
+        (QgsProcessingParameterFile("POINTS", tr("Ground points (LAS/LAZ)"),
+                                    fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)",
+                                    optional=True),
+         "optional: the cloud whose ground points (class 2) are the graph's nodes, as "
+         "in the paper; empty: a regular sample of the raster"),
+        (QgsProcessingParameterNumber("BLOCKS", tr("Number of blocks"),
+                                      QgsProcessingParameterNumber.Integer, None,
+                                      optional=True, minValue=1, maxValue=10000),
+         "normalized-cut segments; empty: chosen by the largest eigengap"),
+        (QgsProcessingParameterNumber("SPACING", tr("Node spacing (metres)"), double,
+                                      spacing_m, minValue=1.0, maxValue=100.0),
+         "distance between graph nodes; smaller is finer and slower"),
+        (QgsProcessingParameterNumber("MAX_EDGE", tr("Longest edge (metres)"),
+                                      double, max_edge_m, minValue=5.0, maxValue=500.0),
+         "nodes closer than this are joined (paper: 80 m)"),
+        (QgsProcessingParameterFileDestination("OUTPUT", tr("City blocks"),
+                                               "GeoPackage (*.gpkg)"),
+         "GeoPackage receiving the city_blocks layer, in the raster's CRS"),
+    ]
+
+
+def train_parameters(tr, width_m: float, guard_m: float, samples: int, steps: int) -> list:
+    """``(parameter, help)`` of *Train road model* (in-process and external), with the
+    defaults of ``gisroads train``."""
+    return [
+        (QgsProcessingParameterRasterLayer("IMAGE", tr("Aerial image")),
+         "RGB or panchromatic image in a projected CRS (metres); a geographic image is "
+         "warped to its UTM zone; bands 1-3 are taken as red, green, blue"),
+        (QgsProcessingParameterFeatureSource("ROADS", tr("Road layer"),
+                                             [QgsProcessing.TypeVectorLine]),
+         "road centre lines over the image, any CRS (reprojected to the image's); they "
+         "need not be complete"),
+        (QgsProcessingParameterField("WIDTH_FIELD", tr("Road width field"), None,
+                                     "ROADS", QgsProcessingParameterField.Numeric,
+                                     optional=True),
+         "field holding each road's width in metres; empty fields, non-positive values "
+         "and no field take the road width below"),
+        (QgsProcessingParameterNumber("WIDTH", tr("Road width (metres)"),
+                                      QgsProcessingParameterNumber.Double, width_m,
+                                      minValue=0.5, maxValue=100.0),
+         "width of the roads without a width field value"),
+        (QgsProcessingParameterNumber("GUARD", tr("Guard band (metres)"),
+                                      QgsProcessingParameterNumber.Double, guard_m,
+                                      minValue=0.0, maxValue=50.0),
+         "no non-road sample within this distance of a road's edge: OpenStreetMap lines "
+         "are often 2-5 m off the road"),
+        (QgsProcessingParameterNumber("SAMPLES", tr("Samples"),
+                                      QgsProcessingParameterNumber.Integer, samples,
+                                      minValue=1000),
+         "boosted trees (.npz) only: pixels sampled from the image, half of them road; "
+         "more samples, slower training"),
+        (QgsProcessingParameterNumber("STEPS", tr("Fine-tuning steps"),
+                                      QgsProcessingParameterNumber.Integer,
+                                      steps, minValue=1),
+         "network (.onnx) only: optimiser steps of 8 crops; more steps, longer training"),
+        (QgsProcessingParameterFileDestination(
+            "OUTPUT", tr("Road model"),
+            tr("Road network (*.onnx);;Boosted trees (*.npz)")),
+         "the model to give to the imagery road network algorithm: .onnx fine-tunes the "
+         "convolutional network, .npz trains boosted trees"),
+    ]

@@ -1,7 +1,5 @@
 """City blocks (normalized cut): Zhu & Mordohai's block segmentation of a road-likelihood map."""
-from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFile,
-                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
-                       QgsProcessingParameterRasterLayer)
+from qgis.core import QgsProcessingOutputNumber
 
 from gisroads.errors import GisroadsError
 from gisroads.lidar.blocks import MAX_EDGE_M, SAMPLE_SPACING_M
@@ -9,7 +7,7 @@ from gisroads.jobs import blocks_job
 
 from ..convert import gisroads_errors, progress_callback
 from ..loading import load_geopackage_on_completion
-from .base import GisroadsAlgorithm
+from .base import GisroadsAlgorithm, city_blocks_parameters
 
 
 class CityBlocks(GisroadsAlgorithm):
@@ -33,31 +31,7 @@ class CityBlocks(GisroadsAlgorithm):
         "city_blocks layer (block_id, segment, area_m2, perimeter_m) in a GeoPackage.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        double = QgsProcessingParameterNumber.Double
-        params = [
-            (QgsProcessingParameterRasterLayer("INPUT", self.tr("Road likelihood raster")),
-             "likelihood GeoTIFF of the LiDAR road network (0-25) or a road probability "
-             "(0-1), projected CRS"),
-            (QgsProcessingParameterFile("POINTS", self.tr("Ground points (LAS/LAZ)"),
-                                        fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)",
-                                        optional=True),
-             "optional: the cloud whose ground points (class 2) are the graph's nodes, as "
-             "in the paper; empty: a regular sample of the raster"),
-            (QgsProcessingParameterNumber("BLOCKS", self.tr("Number of blocks"),
-                                          QgsProcessingParameterNumber.Integer, None,
-                                          optional=True, minValue=1, maxValue=10000),
-             "normalized-cut segments; empty: chosen by the largest eigengap"),
-            (QgsProcessingParameterNumber("SPACING", self.tr("Node spacing (metres)"), double,
-                                          SAMPLE_SPACING_M, minValue=1.0, maxValue=100.0),
-             "distance between graph nodes; smaller is finer and slower"),
-            (QgsProcessingParameterNumber("MAX_EDGE", self.tr("Longest edge (metres)"),
-                                          double, MAX_EDGE_M, minValue=5.0, maxValue=500.0),
-             "nodes closer than this are joined (paper: 80 m)"),
-            (QgsProcessingParameterFileDestination("OUTPUT", self.tr("City blocks"),
-                                                   "GeoPackage (*.gpkg)"),
-             "GeoPackage receiving the city_blocks layer, in the raster's CRS"),
-        ]
-        self.add_parameters(params)
+        self.add_parameters(city_blocks_parameters(self.tr, SAMPLE_SPACING_M, MAX_EDGE_M))
         self.addOutput(QgsProcessingOutputNumber("N_BLOCKS", self.tr("Number of blocks")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802

@@ -1,14 +1,11 @@
 """Train road model: the learned road cue trained on the user's image from a road layer."""
-from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
-                       QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
-                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
-                       QgsProcessingParameterRasterLayer)
+from qgis.core import QgsProcessingOutputNumber
 
 from gisroads.jobs import stage_default, train_job
 from gisroads.learn.convnet import FINE_TUNE_STEPS
 
 from ..convert import gisroads_errors, progress_callback, source_to_frame
-from .base import GisroadsAlgorithm
+from .base import GisroadsAlgorithm, train_parameters
 
 
 class TrainRoadModel(GisroadsAlgorithm):
@@ -34,46 +31,9 @@ class TrainRoadModel(GisroadsAlgorithm):
         "between steps.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.add_parameters([
-            (QgsProcessingParameterRasterLayer("IMAGE", self.tr("Aerial image")),
-             "RGB or panchromatic image in a projected CRS (metres); a geographic image is "
-             "warped to its UTM zone; bands 1-3 are taken as red, green, blue"),
-            (QgsProcessingParameterFeatureSource("ROADS", self.tr("Road layer"),
-                                                 [QgsProcessing.TypeVectorLine]),
-             "road centre lines over the image, any CRS (reprojected to the image's); they "
-             "need not be complete"),
-            (QgsProcessingParameterField("WIDTH_FIELD", self.tr("Road width field"), None,
-                                         "ROADS", QgsProcessingParameterField.Numeric,
-                                         optional=True),
-             "field holding each road's width in metres; empty fields, non-positive values "
-             "and no field take the road width below"),
-            (QgsProcessingParameterNumber("WIDTH", self.tr("Road width (metres)"),
-                                          QgsProcessingParameterNumber.Double,
-                                          stage_default(train_job, "width_m"),
-                                          minValue=0.5, maxValue=100.0),
-             "width of the roads without a width field value"),
-            (QgsProcessingParameterNumber("GUARD", self.tr("Guard band (metres)"),
-                                          QgsProcessingParameterNumber.Double,
-                                          stage_default(train_job, "guard_m"),
-                                          minValue=0.0, maxValue=50.0),
-             "no non-road sample within this distance of a road's edge: OpenStreetMap lines "
-             "are often 2-5 m off the road"),
-            (QgsProcessingParameterNumber("SAMPLES", self.tr("Samples"),
-                                          QgsProcessingParameterNumber.Integer,
-                                          stage_default(train_job, "samples"),
-                                          minValue=1000),
-             "boosted trees (.npz) only: pixels sampled from the image, half of them road; "
-             "more samples, slower training"),
-            (QgsProcessingParameterNumber("STEPS", self.tr("Fine-tuning steps"),
-                                          QgsProcessingParameterNumber.Integer,
-                                          FINE_TUNE_STEPS, minValue=1),
-             "network (.onnx) only: optimiser steps of 8 crops; more steps, longer training"),
-            (QgsProcessingParameterFileDestination(
-                "OUTPUT", self.tr("Road model"),
-                self.tr("Road network (*.onnx);;Boosted trees (*.npz)")),
-             "the model to give to the imagery road network algorithm: .onnx fine-tunes the "
-             "convolutional network, .npz trains boosted trees"),
-        ])
+        self.add_parameters(train_parameters(
+            self.tr, stage_default(train_job, "width_m"), stage_default(train_job, "guard_m"),
+            stage_default(train_job, "samples"), FINE_TUNE_STEPS))
         self.addOutput(QgsProcessingOutputNumber("SAMPLES_USED",
                                                  self.tr("Samples used (boosted trees)")))
         self.addOutput(QgsProcessingOutputNumber("ROAD_SHARE",
