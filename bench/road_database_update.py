@@ -13,7 +13,9 @@ several seeds, and the change layers of gisroads.update.conflate are scored per 
   its hand-digitised centre lines (``--fusa-roads`` reuses a finished ``gisroads lidar``
   GeoPackage), fakes kept clear of the paved areas the truth leaves out
   (gisroads.update.truth_pavement);
-* ``fusa_intensity``: the same with the paper's cue alone (``--cue intensity``).
+* ``fusa_intensity``: the same with the paper's cue alone (``--cue intensity``);
+* ``fusa_model``: the evidence with a model learned from each edited database
+  (``gisroads train fusa.laz database -o model.npz``, then ``gisroads lidar --model``).
 
 Class ``new`` is the deleted roads found again, ``missing`` the fake roads flagged missing.
 
@@ -31,7 +33,7 @@ from pathlib import Path
 import geopandas as gpd
 
 from gisroads.io.vector import read_layer
-from gisroads.jobs import image_job, lidar_job
+from gisroads.jobs import image_job, lidar_job, train_lidar_job
 from gisroads.synthetic import make_scene, write_cloud, write_image
 from gisroads.update import FUSA_UNLABELLED_PAVEMENT, pooled_scores, truth_pavement
 
@@ -86,6 +88,17 @@ def measure(out: Path, seeds: int = 10, fusa_roads: Path | None = None) -> dict:
     results["fusa_intensity"] = pooled_scores(fusa_intensity, truth, edits,
                                               fake_length_m=(20.0, 40.0),
                                               fake_clearance_m=15.0, pavement=pavement)
+
+    def learned(database: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
+        layer = out / "fusa_database.gpkg"
+        database.to_file(layer, driver="GPKG")
+        train_lidar_job(LIDAR / "fusa.laz", layer, out / "fusa_model.npz",
+                        width_field="width_m")
+        return lidar_roads(LIDAR / "fusa.laz", out / "fusa_model_roads.gpkg",
+                           model=out / "fusa_model.npz")
+
+    results["fusa_model"] = pooled_scores(learned, truth, edits, fake_length_m=(20.0, 40.0),
+                                          fake_clearance_m=15.0, pavement=pavement)
     return results
 
 

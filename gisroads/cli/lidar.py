@@ -47,6 +47,10 @@ def _add_cue_options(p) -> None:
     p.add_argument("--threshold", type=float, default=job_default(lidar_job, "threshold"),
                    help="with --cue evidence: road likelihood at which a cell is road "
                         "(0-1, default %(default)g)")
+    p.add_argument("--model", type=Path,
+                   help="an evidence model learned from a road layer of the area "
+                        "('gisroads train CLOUD ROADS -o model.npz'): its probability "
+                        "replaces the evidence rule's likelihood")
 
 
 def _add_hypothesis_options(p) -> None:
@@ -79,7 +83,7 @@ def run(args) -> int:
                        workers=args.workers or default_workers(), scheduler=args.scheduler,
                        work_dir=args.work_dir, tagged_las=args.tagged_las,
                        rasters_dir=args.rasters, background=args.background,
-                       quicklook=args.quicklook,
+                       quicklook=args.quicklook, model=args.model,
                        progress=ProgressBar(not args.json))
     print_result(then_compare(args, result), args.json)
     return 0

@@ -8,7 +8,8 @@ from .report import ProgressBar, print_result
 def add_parser(subparsers) -> None:
     from ..learn.convnet import FINE_TUNE_STEPS
     p = add_command(
-        subparsers, "train", run, "train a road model on an image from a road layer",
+        subparsers, "train", run, "train a road model on an image or a point cloud from a "
+        "road layer",
         "Train the learned road cue on your own image from an existing road layer over "
         "it (e.g. last year's road database or OpenStreetMap): roads are rasterised at "
         "their width, pixels in the core half of a road are road, pixels beyond "
@@ -18,8 +19,11 @@ def add_parser(subparsers) -> None:
         "trains gradient-boosted trees (scikit-learn) on multiscale features in metres. "
         "Give the output to 'gisroads image --model'. Roads "
         "missing from the layer fall among the non-road pixels, a few per cent of "
-        "them, which the models tolerate.")
-    p.add_argument("image", type=Path, help="GeoTIFF (or PNG/JPEG with --pixel and --crs)")
+        "them, which the models tolerate. Given a LAS/LAZ point cloud, trains boosted "
+        "trees on the road evidence's measures per cell (.npz, needs scikit-learn) for "
+        "'gisroads lidar --model'.")
+    p.add_argument("image", type=Path, help="GeoTIFF (or PNG/JPEG with --pixel and --crs), "
+                                            "or a LAS/LAZ point cloud")
     p.add_argument("roads", type=Path, help="road centre lines (GeoPackage, GeoJSON, any OGR "
                                             "line layer, any CRS)")
     p.add_argument("-o", "--out", type=Path, required=True,
@@ -37,7 +41,7 @@ def add_parser(subparsers) -> None:
 
 def _add_sample_options(p) -> None:
     """What is road and what is not: road widths, the guard band, the samples."""
-    from ..jobs import train_job
+    from ..jobs import train_job, train_lidar_job
     p.add_argument("--width-field", help="field of the road layer holding each road's width "
                                          "in metres (empty values take --width)")
     p.add_argument("--width", type=_positive, default=job_default(train_job, "width_m"),
@@ -48,16 +52,26 @@ def _add_sample_options(p) -> None:
                         "road (default %(default)s)")
     p.add_argument("--seed", type=int, default=job_default(train_job, "seed"),
                    help="random seed (default %(default)s)")
-    p.add_argument("--guard", type=float, default=job_default(train_job, "guard_m"),
+    p.add_argument("--guard", type=float,
                    help="guard band beyond the road edge, metres, with no non-road sample "
-                        "(default %(default)g: OpenStreetMap lines are often 2-5 m off)")
+                        f"(default {job_default(train_job, 'guard_m'):g} for an image: "
+                        "OpenStreetMap lines are often 2-5 m off; "
+                        f"{job_default(train_lidar_job, 'guard_m'):g} for a cloud, whose "
+                        "cells are finer)")
 
 
 def run(args) -> int:
-    from ..jobs import train_job
+    from ..jobs import train_job, train_lidar_job
+    guard = {} if args.guard is None else {"guard_m": args.guard}
+    if args.image.suffix.lower() in (".las", ".laz"):
+        result = train_lidar_job(args.image, args.roads, args.out,
+                                 width_field=args.width_field, width_m=args.width,
+                                 seed=args.seed, progress=ProgressBar(not args.json), **guard)
+        print_result(result, args.json)
+        return 0
     result = train_job(args.image, args.roads, args.out, width_field=args.width_field,
-                       width_m=args.width, guard_m=args.guard, pixel_m=args.pixel,
-                       crs=args.crs, samples=args.samples, seed=args.seed,
-                       base=args.base, steps=args.steps, progress=ProgressBar(not args.json))
+                       width_m=args.width, pixel_m=args.pixel, crs=args.crs,
+                       samples=args.samples, seed=args.seed, base=args.base,
+                       steps=args.steps, progress=ProgressBar(not args.json), **guard)
     print_result(result, args.json)
     return 0

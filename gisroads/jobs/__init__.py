@@ -13,7 +13,7 @@ from .evaluate import evaluate_job, synth_job
 from .imagery import image_job, train_job
 from .lidar import (blocks_job, evidence_job, ground_intensity_job, lidar_job,
                     lidar_segmentation_job, likelihood_job, min_cover_job,
-                    rectangles_network_job, tag_job)
+                    rectangles_network_job, tag_job, train_lidar_job)
 from .network import vectorize_job
 from .snakes import attractor_job, register_job, snakes_job
 from .update import update_job
@@ -24,5 +24,5 @@ __all__ = [
     "evaluate_job", "synth_job", "image_job", "train_job", "blocks_job", "evidence_job",
     "ground_intensity_job", "lidar_job", "lidar_segmentation_job", "likelihood_job",
     "min_cover_job", "rectangles_network_job", "tag_job", "vectorize_job", "attractor_job",
-    "register_job", "snakes_job", "update_job",
+    "register_job", "snakes_job", "update_job", "train_lidar_job",
 ]

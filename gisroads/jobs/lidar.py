@@ -16,7 +16,8 @@ from ..geo import POLYGONS, SERVICE_CENTRELINES, GeoRaster
 from ..io.las import GROUND_CLASS, cloud_crs, iter_las_chunks, read_las
 from ..io.quicklook import write_quicklook
 from ..io.raster import read_raster, write_geotiff
-from ..io.vector import GeoPackageWriter, list_layers, read_layer, write_geopackage
+from ..io.vector import (GeoPackageWriter, atomic_path, list_layers, read_layer,
+                         write_geopackage)
 from ..lidar.blocks import (MAX_EDGE_M, MIN_BLOCK_AREA_M2, ROAD_FRACTION, SAMPLE_SPACING_M,
                             city_blocks, road_likelihood, thin_points)
 from ..lidar.ground import ground_planes
@@ -25,14 +26,16 @@ from ..lidar.hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, T_BD
 from ..lidar.intensity import write_intensity_images
 from ..lidar.mincover import A, D_MAX, SEED_STEP_M, exact_min_cover, greedy_min_cover
 from ..lidar.roads import rectangles_to_roads
+from ..lidar.learned import save_evidence_model
 from ..lidar.pipeline import (EVIDENCE_THRESHOLD, TiledRoads, auto_cell_m,
                               edges_and_segments, evidence_raster, extract_roads,
-                              ground_and_intensity)
+                              ground_and_intensity, train_evidence_model)
 from ..lidar.tagging import ground_level_heights, tag_road_points
 from ..tiling.tilestore import inputs_crs, las_inputs
 from ..progress import Progress, report, scaled
 from ..resources import styles_dir
-from .common import _layer, _warn_if_empty, _warn_if_no_road, network_summary, stage_default
+from .common import (_layer, _map_lines, _warn_if_empty, _warn_if_no_road, network_summary,
+                     stage_default)
 
 
 def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "cue"),
@@ -47,7 +50,8 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
               min_points: int = stage_default(extract_roads, "min_points"),
               workers: int = 1, scheduler: str | None = None, work_dir=None,
               tile_maps: bool | None = None, tagged_las=None, rasters_dir=None,
-              background=None, quicklook=None, progress: Progress = None) -> dict:
+              background=None, quicklook=None, model=None,
+              progress: Progress = None) -> dict:
     """The road network of a LAS/LAZ file into a road-network GeoPackage.
 
     Writes ``out_path`` (road_centrelines, road_polygons, junctions, and the QA layers of
@@ -59,7 +63,7 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
     intensity, else the road evidence, with its QGIS style beside it as ``.qml``; its kind
     in the result's ``background_kind``) and a
     ``quicklook`` PNG over the same image.
-    The parameters from ``cue`` to ``work_dir`` are those of
+    The parameters from ``cue`` to ``work_dir`` and ``model`` are those of
     :func:`gisroads.lidar.pipeline.extract_roads`; ``tile_maps`` defaults to keeping the
     tiles' likelihood maps only when ``rasters_dir`` is given. ``cloud_path`` may also be
     several files, a folder of them or a glob. A cloud without roads gives empty layers
@@ -83,7 +87,7 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
             widths_m=widths_m, lengths_m=lengths_m, n_segments=n_segments, t_planar=t_planar,
             t_vert=t_vert, threshold=threshold, network_options=network_options,
             min_points=min_points, workers=workers, scheduler=scheduler, work_dir=work_dir,
-            lazy=True, progress=scaled(progress, 0.0, 0.8)) as roads:
+            lazy=True, model=model, progress=scaled(progress, 0.0, 0.8)) as roads:
         network = roads.network
         rasters = None if rasters_dir is None else Path(rasters_dir)
         # the tiles' per-width likelihood maps are read only to be written
@@ -240,6 +244,45 @@ def ground_intensity_job(cloud_path, intensity_path, *, heights_path=None, cell_
             "ground_points": int((planes.level >= 0).sum()), "points": len(cloud)}
 
 
+def train_lidar_job(cloud_path, roads_path, out_path, *, width_field: str | None = None,
+                    width_m: float = stage_default(train_evidence_model, "default_width_m"),
+                    guard_m: float = stage_default(train_evidence_model, "guard_m"),
+                    seed: int = stage_default(train_evidence_model, "seed"),
+                    tile_m: float = stage_default(extract_roads, "tile_m"),
+                    overlap_m: float = stage_default(extract_roads, "overlap_m"),
+                    cell_m: float | None = None, progress: Progress = None) -> dict:
+    """An evidence model of a LAS/LAZ cloud learned from a road layer of its area (the
+    road-database update; :func:`gisroads.lidar.pipeline.train_evidence_model`), written to
+    ``out_path`` (.npz) for ``lidar_job(..., model=out_path)``. Roads as ``train_job``
+    takes them (any OGR line layer, any CRS; ``width_field`` or ``width_m`` per road).
+    Needs scikit-learn."""
+    try:
+        import sklearn  # noqa: F401  (optional: checked here to say what is missing)
+    except ImportError:
+        raise GisroadsError("training a model needs scikit-learn: pip install scikit-learn"
+                            ) from None
+    if Path(out_path).suffix.lower() != ".npz":
+        raise GisroadsError(f"{out_path}: a LiDAR model is written as .npz")
+    roads = _map_lines(roads_path)
+    if roads.crs is None:
+        raise GisroadsError(f"{roads_path}: the road layer has no CRS; cannot place it on "
+                            "the cloud")
+    if width_field is not None and width_field not in roads.columns:
+        raise GisroadsError(f"{roads_path}: no field {width_field!r}")
+    if width_m <= 0 or guard_m < 0:
+        raise GisroadsError("the width must be positive and the guard band at least 0 m")
+    model = train_evidence_model(cloud_path, roads, width_field=width_field,
+                                 default_width_m=width_m, guard_m=guard_m, seed=seed,
+                                 tile_m=tile_m, overlap_m=overlap_m, cell_m=cell_m,
+                                 progress=progress)
+    with atomic_path(out_path) as tmp:
+        save_evidence_model(model, tmp)
+    meta = model.metadata
+    return {"model": Path(out_path), "kind": meta["kind"], "road_cells": meta["road_cells"],
+            "other_cells": meta["other_cells"], "cell_m": meta["cell_m"],
+            "guard_m": meta["guard_m"], "trees": model.n_trees}
+
+
 def evidence_job(cloud_path, out_path, *, cell_m: float | None = None,
                  tile_m: float = stage_default(evidence_raster, "tile_m"),
                  overlap_m: float = stage_default(evidence_raster, "overlap_m"),
@@ -247,8 +290,8 @@ def evidence_job(cloud_path, out_path, *, cell_m: float | None = None,
     """The road-evidence raster of a LAS/LAZ file (the ``evidence`` cue of ``gisroads
     lidar``) as a one-band GeoTIFF of road likelihood in [0, 1] (NaN outside the data), in
     the cloud's metre working CRS; see :func:`gisroads.lidar.pipeline.evidence_raster`."""
-    likelihood, _, _, used, missing = evidence_raster(cloud_path, cell_m=cell_m, tile_m=tile_m,
-                                                overlap_m=overlap_m, progress=progress)
+    likelihood, _, _, used, missing, _ = evidence_raster(
+        cloud_path, cell_m=cell_m, tile_m=tile_m, overlap_m=overlap_m, progress=progress)
     if likelihood is None:
         raise GisroadsError(f"{cloud_path}: no tile holds enough points to image")
     write_geotiff(out_path, likelihood, band_names=["road_likelihood"])

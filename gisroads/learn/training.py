@@ -201,42 +201,84 @@ def _road_widths(roads: gpd.GeoDataFrame, width_m, width_field, default_width_m)
     return np.full(len(roads), float(default_width_m))
 
 
-def layer_labels(grid: WorkGrid, roads: gpd.GeoDataFrame, *, width_m=None,
-                 width_field: str | None = None, default_width_m: float = 6.0,
-                 guard_m: float = 5.0, core_fraction: float = 0.5
+def layer_labels(grid: WorkGrid, roads: gpd.GeoDataFrame, **options
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Positive and negative pixels of a work grid from road centre lines.
+    """Positive and negative pixels of a work grid from road centre lines
+    (:func:`line_labels` on the grid; same keyword arguments)."""
+    return line_labels(roads, shape=grid.shape, transform=grid.transform,
+                       crs=grid.image.crs, pixel_m=grid.pixel_m, **options)
 
-    A road of width ``w`` gives positives within ``max(core_fraction * w / 2, pixel)`` of
+
+def line_labels(roads: gpd.GeoDataFrame, *, shape, transform, crs, pixel_m: float,
+                width_m=None, width_field: str | None = None, default_width_m: float = 6.0,
+                guard_m: float = 5.0, core_fraction: float = 0.5,
+                between_negative: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Positive and negative cells of a raster grid from road centre lines.
+
+    A road of width ``w`` gives positives within ``max(core_fraction * w / 2, pixel_m)`` of
     its line and forbids negatives within ``w / 2 + guard_m`` of it (the guard absorbs
     misregistered lines and kerbs).
 
+    Parameters
+    ----------
+    roads : GeoDataFrame
+        (Multi)LineStrings; reprojected to ``crs`` when both are known.
+    shape : (int, int)
+        Rows and columns of the grid.
+    transform : Affine
+        The grid's transform (metres).
+    crs : CRS or None
+    pixel_m : float
+        Cell side, metres.
+    width_m : float, optional
+        Every road's width, metres; else ``width_field`` or ``default_width_m``.
+    width_field : str, optional
+        Field of ``roads`` holding each road's width, metres.
+    default_width_m : float
+        Width of a road without one, metres.
+    guard_m : float
+        Band beside each road's edge left out of the negatives, metres.
+    core_fraction : float
+        Share of the half width that is positive, in (0, 1].
+    between_negative : bool
+        Cells in the guard bands of two or more roads but beyond every road's edge (plus
+        half a cell) are negatives too: the median between two carriageways, the verge
+        between parallel roads, which the guard bands would otherwise swallow.
+
     Returns
     -------
-    positive, negative : ndarray of bool, shape ``grid.shape``
+    positive, negative : ndarray of bool, shape ``shape``
     """
     if guard_m < 0 or not 0 < core_fraction <= 1:
         raise GisroadsError("guard_m must be >= 0 and core_fraction in (0, 1]")
-    if roads.crs is not None and grid.image.crs is not None:
-        roads = roads.to_crs(grid.image.crs)
+    if roads.crs is not None and crs is not None:
+        roads = roads.to_crs(crs)
     lines = shapely.force_2d(np.asarray(roads.geometry.values, dtype=object))
     keep = ~(shapely.is_missing(lines) | shapely.is_empty(lines))
     kinds = set(shapely.get_type_id(lines[keep]).tolist())
     if not kinds <= {1, 5}:
         raise GisroadsError("the road layer must hold (Multi)LineStrings")
+    if keep.any() and not np.isfinite(shapely.bounds(lines[keep])).all():
+        # (rasterising infinite coordinates crashes GDAL)
+        raise GisroadsError("the road layer's coordinates do not fit its CRS (metres "
+                            "labelled as degrees?): give the layer its true CRS")
     widths = _road_widths(roads, width_m, width_field, default_width_m)[keep]
     lines = lines[keep]
     if len(lines) == 0:
         raise GisroadsError("the road layer has no line")
-    core = shapely.buffer(lines, np.maximum(core_fraction * widths / 2, grid.pixel_m))
+    core = shapely.buffer(lines, np.maximum(core_fraction * widths / 2, pixel_m))
     guard = shapely.buffer(lines, widths / 2 + guard_m)
 
-    def burn(shapes):
-        return rio_features.rasterize(((g, 1) for g in shapes), out_shape=grid.shape,
-                                      transform=grid.transform, fill=0,
-                                      dtype=np.uint8).astype(bool)
+    def burn(shapes, merge_alg=rio_features.MergeAlg.replace):
+        return rio_features.rasterize(((g, 1) for g in shapes), out_shape=tuple(shape),
+                                      transform=transform, fill=0, dtype=np.uint8,
+                                      merge_alg=merge_alg)
 
-    return burn(core), ~burn(guard)
+    negative = burn(guard) == 0
+    if between_negative:
+        edge = burn(shapely.buffer(lines, widths / 2 + pixel_m / 2)) > 0
+        negative |= (burn(guard, rio_features.MergeAlg.add) >= 2) & ~edge
+    return burn(core) > 0, negative
 
 
 ROAD_LAYER = "road layer"

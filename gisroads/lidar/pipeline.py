@@ -41,11 +41,13 @@ from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.rasters import raster_to_network
 from ..tiling.tiles import OVERLAP_M, TILE_M, Tile, stitch_tiles
-from ..tiling.tilestore import (TileStore, code_fingerprint, digest, inputs_crs,
+from ..tiling.tilestore import (TileStore, code_fingerprint, digest, file_digest, inputs_crs,
                                 las_inputs, open_store)
 from .evidence import (CAR_PARK_FLANK_SHARE, SHORE_FLANK_SHARE, dropout_cells, road_evidence,
                        vehicle_cells, without_flanked_roads)
 from .ground import GroundPlanes, ground_planes
+from .learned import (evidence_features, fit_evidence_model, learned_likelihood,
+                      load_evidence_model)
 from .hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, likelihood_maps,
                          road_hypotheses)
 from .intensity import CELL_M, IntensityImages, auto_cell_m, image_grid, intensity_images
@@ -63,6 +65,9 @@ EVIDENCE_THRESHOLD = 0.8
 #: (hysteresis, as Canny's edge thresholds), so a road stays whole through a stretch its
 #: cues doubt and weak patches alone stay out (``bench/lidar_evidence_network.py``).
 EVIDENCE_NETWORK_OPTIONS = {"part_options": {"low_threshold": 0.6}}
+#: The same hysteresis for an evidence model's probability: its low threshold is this
+#: share of the model's threshold (as 0.6 is of 0.8).
+LOW_SHARE = 0.75
 N_SEGMENTS = 150
 """NCut regions per tile image (Zhu & Mordohai, section 4.2: 100-200)."""
 
@@ -82,6 +87,9 @@ class EvidenceMosaic(NamedTuple):
     """Cue -> how it was measured (first tile)."""
     missing: dict
     """Cue -> why it was left out (first tile)."""
+    features: GeoRaster | None = None
+    """With ``features=True``: the evidence model's features
+    (:data:`gisroads.lidar.learned.EVIDENCE_FEATURES` bands) on the same grid."""
 
 
 #: Largest mosaic of tile rasters (ground heights, intensity, evidence) made in memory.
@@ -243,6 +251,11 @@ class _TileJob:
     results: Path
     """Folder of finished tiles."""
     references: object = None
+    model: str | None = None
+    """Evidence cue: an evidence model file (:mod:`gisroads.lidar.learned`) whose
+    probability replaces the rule's likelihood."""
+    features: bool = False
+    """Evidence cue: keep the model features (:func:`evidence_features`) as extra bands."""
 
 
 class _Finished(NamedTuple):
@@ -279,17 +292,25 @@ def _run_tile(job: _TileJob, tile: Tile):
         else:
             evidence = road_evidence(cloud, bounds=tile.bounds, references=job.references,
                                      **job.options)
-            raster = evidence.likelihood
+            raster = (evidence.likelihood if job.model is None
+                      else learned_likelihood(evidence, _evidence_model(job.model)))
             intensity = evidence.measures.get("intensity")
             bands = np.stack([raster.data, vehicle_cells(evidence).data,
                               dropout_cells(evidence).data,
                               np.full(raster.data.shape, np.nan, np.float32)
                               if intensity is None else intensity.data])
+            if job.features:
+                bands = np.concatenate([bands, evidence_features(evidence)])
             result = (GeoRaster(bands, raster.transform, raster.crs),
                       evidence.references, evidence.used, evidence.missing)
     del cloud
     keep_result(path, result)
     return False, _for_driver(result)
+
+
+@lru_cache(maxsize=2)
+def _evidence_model(path: str):
+    return load_evidence_model(path)
 
 
 def _for_driver(result):
@@ -371,15 +392,17 @@ def _core_only(tile: Tile, result: TileRoads) -> TileRoads:
 def evidence_raster(path, *, tile_m: float = TILE_M, overlap_m: float = OVERLAP_M,
                     cell_m: float | None = None, min_points: int = 1000,
                     workers: int = 1, scheduler: str | None = None, work_dir=None,
+                    model=None, features: bool = False,
                     progress: Progress = None, _run: dict | None = None
                     ) -> EvidenceMosaic:
     """The road likelihood of a LAS/LAZ file (:func:`gisroads.lidar.evidence.road_evidence`),
     tile by tile, mosaicked from the tiles' cores.
 
     ``path`` may also be several files, a folder of them or a glob; ``workers``,
-    ``scheduler`` and ``work_dir`` as in :func:`extract_roads`. Every tile is normalised by
-    the references (open-ground density, noise floor, bright intensity) of the first tile
-    holding ``min_points``, so the tiles of one cloud agree.
+    ``scheduler``, ``work_dir`` and ``model`` as in :func:`extract_roads`. Every tile is
+    normalised by the references (open-ground density, noise floor, bright intensity) of the
+    first tile holding ``min_points``, so the tiles of one cloud agree. ``features`` keeps
+    the evidence model's features too (memory: 13 float32 bands per cell).
 
     Returns
     -------
@@ -390,6 +413,8 @@ def evidence_raster(path, *, tile_m: float = TILE_M, overlap_m: float = OVERLAP_
     try:
         return _evidence_from_store(store, cell_m=cell_m, min_points=min_points,
                                     workers=workers, scheduler=scheduler, work_dir=work_dir,
+                                    model=None if model is None else str(Path(model).resolve()),
+                                    features=features,
                                     progress=scaled(progress, 0.1, 1.0),
                                     run={} if _run is None else _run)
     finally:
@@ -398,13 +423,15 @@ def evidence_raster(path, *, tile_m: float = TILE_M, overlap_m: float = OVERLAP_
 
 
 def _evidence_from_store(store: TileStore, *, cell_m, min_points, workers, scheduler,
-                         work_dir, progress, run) -> EvidenceMosaic:
+                         work_dir, model, features, progress, run) -> EvidenceMosaic:
     tiles = store.tiles
     if cell_m is None:
         cell_m = auto_cell_m(store.point_count, _covered_m2(tiles))
+    key = {"cell_m": cell_m, "min_points": min_points, "features": features,
+           "model": None if model is None else file_digest(model)}
     job = _TileJob(store, "evidence", min_points, {"cell_m": cell_m},
-                   _results_folder(store, work_dir, "evidence",
-                                   {"cell_m": cell_m, "min_points": min_points}))
+                   _results_folder(store, work_dir, "evidence", key), model=model,
+                   features=features)
     # the first tile with enough points gives the references every other tile is scaled by
     results, first = [], len(tiles)
     for i, tile in enumerate(tiles):
@@ -427,16 +454,21 @@ def _evidence_from_store(store: TileStore, *, cell_m, min_points, workers, sched
     _, _, used, missing = next(r for r in results if r is not None)
     mosaic = mosaic_cores(pieces, cell_m)
     band = [GeoRaster(data, mosaic.transform, mosaic.crs)
-            for data in (mosaic.data[0], mosaic.data[1:3], mosaic.data[3])]
-    return EvidenceMosaic(*band, used, missing)
+            for data in (mosaic.data[0], mosaic.data[1:3], mosaic.data[3], mosaic.data[4:])]
+    return EvidenceMosaic(*band[:3], used, missing, band[3] if features else None)
 
 
-def _evidence_roads(path, *, threshold: float, network_options: dict | None,
+def _evidence_roads(path, *, threshold: float, network_options: dict | None, model,
                     progress: Progress, **raster_options) -> LidarRoads:
     working, source = inputs_crs(las_inputs(path))
     run: dict = {}
-    likelihood, flanks, intensity, used, _ = evidence_raster(
-        path, progress=scaled(progress, 0.0, 0.6), _run=run, **raster_options)
+    likelihood, flanks, intensity, used, _, _ = evidence_raster(
+        path, progress=scaled(progress, 0.0, 0.6), _run=run, model=model, **raster_options)
+    if model is not None:
+        threshold = float(load_evidence_model(model).metadata["threshold"])
+        used = {**used, "model": f"learned from a road layer ({Path(model).name})"}
+        network_options = {"part_options": {"low_threshold": LOW_SHARE * threshold},
+                           **(network_options or {})}
     if likelihood is None:
         network = lines_to_network(_no_lines(working), method=EVIDENCE_METHOD)
     else:
@@ -467,6 +499,44 @@ def _evidence_roads(path, *, threshold: float, network_options: dict | None,
             {name: frame.to_crs(source) for name, frame in network.qa.items()})
     return LidarRoads(network, None, evidence=likelihood, ground_intensity=intensity,
                       cues=used, run=run)
+
+
+def train_evidence_model(path, roads: gpd.GeoDataFrame, *, width_m=None,
+                         width_field: str | None = None, default_width_m: float = 6.0,
+                         guard_m: float = 3.0, seed: int = 0, threads: int = 1,
+                         progress: Progress = None, **raster_options):
+    """An evidence model of a point cloud learned from a road layer of its area (beyond the
+    paper; :mod:`gisroads.lidar.learned`).
+
+    Parameters
+    ----------
+    path : str or Path, or a list of them
+        LAS/LAZ file(s), as :func:`extract_roads` takes them.
+    roads : GeoDataFrame
+        The area's road centre lines (any CRS; reprojected).
+    width_m, width_field, default_width_m, guard_m, seed, threads
+        See :func:`gisroads.lidar.learned.fit_evidence_model`.
+    progress : callable, optional
+    **raster_options
+        ``tile_m``, ``overlap_m``, ``cell_m``, ``min_points``, ``workers``, ``scheduler``,
+        ``work_dir`` of :func:`evidence_raster`.
+
+    Returns
+    -------
+    RoadModel
+        Save it with :func:`gisroads.lidar.learned.save_evidence_model`; use it with
+        ``extract_roads(..., model=path)``.
+    """
+    mosaic = evidence_raster(path, features=True, progress=scaled(progress, 0.0, 0.8),
+                             **raster_options)
+    if mosaic.features is None:
+        raise GisroadsError("the cloud has no tile with enough points to learn from")
+    report(progress, 0.8, "fitting the model")
+    model = fit_evidence_model(mosaic.features, roads, width_m=width_m,
+                               width_field=width_field, default_width_m=default_width_m,
+                               guard_m=guard_m, seed=seed, threads=threads)
+    report(progress, 1.0, "model fitted")
+    return model
 
 
 def service_lines(lines: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
@@ -505,7 +575,7 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = TILE_M,
                   n_segments: int = N_SEGMENTS, t_planar: float = 0.01, t_vert: float = 0.98,
                   threshold: float = EVIDENCE_THRESHOLD, network_options: dict | None = None,
                   min_points: int = 1000, workers: int = 1, scheduler: str | None = None,
-                  work_dir=None, tile_maps: bool = True, lazy: bool = False,
+                  work_dir=None, tile_maps: bool = True, lazy: bool = False, model=None,
                   progress: Progress = None) -> LidarRoads | TiledRoads:
     """The road network of a point cloud, tile by tile.
 
@@ -528,7 +598,7 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = TILE_M,
     cell_m : float, optional
         Image cell, metres; by default :func:`auto_cell_m` of the cloud.
     threshold : float
-        ``cue="evidence"``: likelihood at which a cell is road.
+        ``cue="evidence"``: likelihood at which a cell is road (a model brings its own).
     network_options : dict, optional
         ``cue="evidence"``: keyword arguments of
         :func:`gisroads.network.rasters.raster_to_network`.
@@ -554,6 +624,10 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = TILE_M,
         left in the files the tiles wrote, to be read one tile at a time (a city's outputs
         written in the memory of one tile: :func:`gisroads.jobs.lidar.lidar_job`). Use it
         as a context manager: its end removes the temporary tile store.
+    model : str or Path, optional
+        ``cue="evidence"``: an evidence model learned from a road layer of the area
+        (:func:`train_evidence_model`; beyond the paper): its probability replaces the
+        rule's likelihood.
     Other parameters (``cue="intensity"``): see :func:`extract_tile`.
 
     Returns
@@ -600,11 +674,15 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = TILE_M,
     """
     if cue not in CUES:
         raise GisroadsError(f"cue must be one of {CUES}, not {cue!r}")
+    if model is not None:
+        if cue != "evidence":
+            raise GisroadsError("a model works on the evidence cue; leave --cue out")
+        load_evidence_model(model)  # refused before any work
     with shared_workers():  # one cluster for the reading pass and the tiles
         parallel = dict(workers=workers, scheduler=scheduler, work_dir=work_dir)
         if cue == "evidence":
             roads = _evidence_roads(path, threshold=threshold, network_options=network_options,
-                                    progress=progress, tile_m=tile_m, overlap_m=overlap_m,
+                                    model=model, progress=progress, tile_m=tile_m, overlap_m=overlap_m,
                                     cell_m=cell_m, min_points=min_points, **parallel)
             tiled = TiledRoads(roads.network, cue, tiles=[], files=[], levels=0, imaged=False,
                                evidence=roads.evidence,

@@ -102,6 +102,11 @@ def digest(value) -> str:
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
+def file_digest(path) -> str:
+    """A short hash of a file's bytes."""
+    return hashlib.sha1(Path(path).read_bytes()).hexdigest()[:16]
+
+
 def code_fingerprint(sources, modules=()) -> str:
     """A short hash of gisroads' own source files and of libraries' versions, for the key
     of finished work kept in a work folder: work done by another version of the code is not

@@ -288,8 +288,9 @@ def pooled_scores(extracted: gpd.GeoDataFrame, truth: gpd.GeoDataFrame, seeds, *
 
     Parameters
     ----------
-    extracted : GeoDataFrame
-        Extracted centre lines (any CRS).
+    extracted : GeoDataFrame or callable
+        Extracted centre lines (any CRS), or ``extracted(database)`` that gives them for
+        an edited database (an extraction that learns from the database).
     truth : GeoDataFrame
         Truth centre lines in a metre CRS with widths in ``width_field`` (metres).
     seeds : iterable of int
@@ -308,7 +309,8 @@ def pooled_scores(extracted: gpd.GeoDataFrame, truth: gpd.GeoDataFrame, seeds, *
               for name in CLASSES}
     for seed in seeds:
         edited = edit_database(truth, seed=seed, width_field=width_field, **edit_options)
-        changes = conflate(extracted, edited.database, id_field="db_id",
+        lines = extracted(edited.database) if callable(extracted) else extracted
+        changes = conflate(lines, edited.database, id_field="db_id",
                            width_field=width_field)
         for name, score in score_changes(changes, edited).items():
             total = totals[name]
