@@ -8,7 +8,7 @@ export QT_QPA_PLATFORM := offscreen
 # 2 cores: OpenBLAS threads thrash under load (an NCut went from 4 s to 29 s)
 export OPENBLAS_NUM_THREADS := 1
 
-.PHONY: demo test test-core test-core-qgis test-qgis plugin bench bench-city setup setup-core setup-bench
+.PHONY: demo test lint test-core test-core-qgis test-qgis plugin bench bench-city setup setup-core setup-bench
 
 setup:
 	@scripts/setup.sh apt venv train qgis
@@ -24,9 +24,13 @@ setup-bench:
 demo: setup-core
 	$(VENV)/gisroads demo --out out/demo
 
-## test: core suite on modern wheels, core suite on Debian's QGIS stack, provider suite in QGIS
-## (each part alone: make test-core, test-core-qgis, test-qgis)
-test: test-core test-core-qgis test-qgis
+## test: the linter, core suite on modern wheels, core suite on Debian's QGIS stack, provider
+## suite in QGIS (each part alone: make lint, test-core, test-core-qgis, test-qgis)
+test: lint test-core test-core-qgis test-qgis
+
+# ruff, with the checks chosen in pyproject.toml ([tool.ruff]), over the whole tree
+lint: setup
+	$(VENV)/ruff check .
 
 test-core: setup
 	$(VENV)/python -m pytest -q tests --ignore=tests/qgis_provider

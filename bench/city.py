@@ -140,7 +140,7 @@ def measure(out: Path, *, sides_km=(1.0, 2.0), density: float = 10.0, workers=(1
                 runs[w] = run
                 shutil.rmtree(work, ignore_errors=True)
             first = runs[workers[0]]
-            for w, run in runs.items():
+            for run in runs.values():
                 run["same_output_as_1_worker"] = bool(
                     list(run["_wkb"]) == list(first["_wkb"])
                     and all(np.array_equal(run["_wkb"][name], first["_wkb"][name])
@@ -178,7 +178,7 @@ def table(result: dict) -> str:
     lines = ["| city | points | workers | tiles | read s | tiles s | network s | writing s "
              "| total s | CPU s | s/km² | peak MB driver / worker | C / K / Q | same output |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for key, size in result["sizes"].items():
+    for size in result["sizes"].values():
         for w, r in size["runs"].items():
             lines.append(
                 f"| {size['side_km'] ** 2:g} km² | {size['points'] / 1e6:.1f} M | {w} | "

@@ -282,7 +282,8 @@ def markdown(frame: pd.DataFrame) -> str:
             return "-" if np.isnan(v) else f"{v:.3f}"
         return str(v)
     lines = ["| " + " | ".join(frame.columns) + " |", "|" + "---|" * len(frame.columns)]
-    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(index=False)]
+    lines += ["| " + " | ".join(cell(v) for v in row) + " |"
+              for row in frame.itertuples(index=False)]
     return "\n".join(lines)
 
 

@@ -22,7 +22,8 @@ import sys
 import time
 from contextvars import ContextVar
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
+from collections.abc import Callable, Sequence
 
 from .errors import GisroadsError
 from .progress import Progress, report
@@ -94,7 +95,7 @@ def worker_python() -> str:
     process's ``sys.path`` (multiprocessing's spawn passes it), so they import the same
     packages.
     """
-    version = "%d.%d" % sys.version_info[:2]
+    version = "{}.{}".format(*sys.version_info[:2])
     ours = f"{version} {sys.base_prefix}"
     candidates = [sys.executable, os.path.join(sys.base_prefix, "bin", f"python{version}")]
     for candidate in filter(None, candidates):

@@ -22,7 +22,7 @@ def classFactory(iface):  # noqa: N802 (QGIS's name)
         # external-tool mode; without a gisroads command, Set up gisroads makes one
         return ExternalPlugin(iface, missing_message(missing), find_executable())
     try:
-        from . import provider  # noqa: F401: imports gisroads and every dependency
-    except Exception as error:  # noqa: BLE001: any import failure is reported, not raised
+        from . import provider  # noqa: F401  (imports gisroads and every dependency)
+    except Exception as error:  # noqa: BLE001  (any import failure is reported, not raised)
         return UnavailablePlugin(iface, load_error_message(error))
     return GisroadsPlugin(iface)

@@ -47,7 +47,7 @@ def installed_version(module: str, distribution: str) -> str | None:
     except importlib.metadata.PackageNotFoundError:  # a build without metadata
         try:
             return str(getattr(importlib.import_module(module), "__version__", "0"))
-        except Exception:  # noqa: BLE001: an import that fails is a missing package
+        except Exception:  # noqa: BLE001  (an import that fails is a missing package)
             return None
 
 

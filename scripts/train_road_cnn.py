@@ -32,8 +32,8 @@ import torch  # noqa: E402
 
 from gisroads.imagery.datasets import massachusetts_valid  # noqa: E402
 from gisroads.learn.convnet import DEFAULT_CONVNET_PATH  # noqa: E402
-from gisroads.learn.convnet_training import (export_onnx, model_from_arrays,  # noqa: E402
-                                             model_from_onnx, predict_tiles, state_to_arrays, train_convnet,
+from gisroads.learn.convnet_training import (export_onnx, model_from_onnx,  # noqa: E402
+                                             predict_tiles, state_to_arrays, train_convnet,
                                              working_tile)
 from gisroads.learn.scores import pixel_auc  # noqa: E402
 
@@ -41,7 +41,9 @@ TRAINING_DIR = ROOT.parent / "shared" / "data" / "training"
 PIXEL_M = 1.0
 """Working pixel size, metres: the coarsest source (Massachusetts, 1 m; Dubai about 1-2 m)
 is not made finer than it was recorded, roads of 3 m and more stay three pixels wide, and a
-1000 x 1000 tile at 0.5 m costs the network a quarter of the work it would at 0.5 m."""
+1000 x 1000 tile at 1 m costs the network a quarter of the work it would at 0.5 m."""
+#: pixel IoU is reported at each of these road thresholds
+THRESHOLDS = tuple(np.round(np.arange(0.2, 0.75, 0.05), 2))
 SOURCE_PIXEL_M = {"eth_cil": 0.6, "cil2022": 0.6, "massachusetts_crops": 1.0, "dubai": 1.2}
 DUBAI_ROAD = np.array([0x6E, 0xC1, 0xE4])
 DUBAI_UNLABELLED = np.array([0x9B, 0x9B, 0x9B])
@@ -94,7 +96,7 @@ def load_tiles():
     return train, validation
 
 
-def evaluate(model, tiles, thresholds=np.round(np.arange(0.2, 0.75, 0.05), 2)):
+def evaluate(model, tiles, thresholds=THRESHOLDS):
     """Per source: pixel AUC and the pixel IoU at each threshold (valid pixels)."""
     probabilities = predict_tiles(model, tiles)
     rows = {}

@@ -128,11 +128,13 @@ TRIED = """
     tiles differed from the whole image by up to 0.45 in `line_mean_along_48m`) gave
     0.279 / 0.282 at 0.4 and 0.285 / 0.288 at 0.5.
   - with that first version (seed 0, against its 0.279 / 0.285 at 0.4 / 0.5): lines over
-    96 m as well (57 features): quality 0.281 / 0.284, AUC 0.822, DeepGlobe 0.013. Over 12 m as well: 0.282 / 0.278, AUC 0.811, Paris 0.169.
+    96 m as well (57 features): quality 0.281 / 0.284, AUC 0.822, DeepGlobe 0.013. Over 12 m as
+    well: 0.282 / 0.278, AUC 0.811, Paris 0.169.
     Neither beyond the seed noise; not kept.
   - self-adaptation (same first version, seed 0) with non-road samples also from the grey
     pixels (the colour cue) outside the model's top 20 % (teaching the image's model that
-    grey alone is not road): 0.271 / 0.270, AUC 0.808; DeepGlobe 0.055 / 0.062, Massachusetts 0.289 / 0.280,
+    grey alone is not road): 0.271 / 0.270, AUC 0.808; DeepGlobe 0.055 / 0.062,
+    Massachusetts 0.289 / 0.280,
     but ETH 0.375 / 0.381 (its grey roads under trees and shadows become non-road). Not
     kept.
 """
@@ -276,12 +278,14 @@ read without pickle; prediction is numpy only and equals scikit-learn's `predict
 the fitted classifier.
 
 ## Data
-{meta['data']}. Pixel size assumed {SAMPLING['source_pixel_m']} m. Never trained on the benchmark images
+{meta['data']}. Pixel size assumed {SAMPLING['source_pixel_m']} m. Never trained on the benchmark
+images
 (`../shared/data/imagery`): the scores below are held out.
 
 Augmentation ({SAMPLING['copies']} copies per tile, {meta['samples']} balanced samples;
 probabilities calibrated to the tiles' road share of {meta['calibrated_road_share']:.2f}):
-each copy rescaled to one of {list(meta['pixel_sizes_m'])} m, random gamma 0.75-1.33, per-band gain +-15 %, offset, noise; {SAMPLING['grey_share']:.0%} of
+each copy rescaled to one of {list(meta['pixel_sizes_m'])} m, random gamma 0.75-1.33, per-band
+gain +-15 %, offset, noise; {SAMPLING['grey_share']:.0%} of
 the copies reduced to one band (a random mix of R, G, B) for panchromatic images. Pixels
 next to the road border are not sampled.
 
@@ -315,7 +319,10 @@ shared (loaded) machine.
 """
     if rows_adapted:
         text += f"""
-### With self-adaptation (`gisroads.imagery.pipeline.road_probability(context=None)`: the default path before its context model, `default_context_model.md`)
+### With self-adaptation
+
+`gisroads.imagery.pipeline.road_probability(context=None)`: the default path before its
+context model, `default_context_model.md`.
 The top 8 % of each image's pixels by this model's probability as road, only where the
 naive baseline's colour cue also takes them for road surface (grey, neither shadow nor
 white: `gisroads.imagery.baseline.road_colour_mask`; an image without such pixels keeps

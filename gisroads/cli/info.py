@@ -24,12 +24,12 @@ def run(args) -> int:
 def _format_info(info: dict) -> str:
     if info["kind"] == "vector":
         return "\n".join(
-            f"{l['layer']}: {l['features']} features, "
-            f"{'/'.join(l['geometry']) or 'no geometry type'}"
-            f"{' (declared)' if l['geometry'] and not l['features'] else ''}, "
-            f"CRS {l['crs']} (EPSG {l['epsg']}), "
-            + (f"extent {as_text(l['extent'])}" if l["extent"] else "no extent")
-            for l in info["layers"])
+            f"{layer['layer']}: {layer['features']} features, "
+            f"{'/'.join(layer['geometry']) or 'no geometry type'}"
+            f"{' (declared)' if layer['geometry'] and not layer['features'] else ''}, "
+            f"CRS {layer['crs']} (EPSG {layer['epsg']}), "
+            + (f"extent {as_text(layer['extent'])}" if layer["extent"] else "no extent")
+            for layer in info["layers"])
     lines = [f"{info['path']} ({info['kind']})"]
     for key, value in info.items():
         if key in {"kind", "path"}:

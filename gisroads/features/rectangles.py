@@ -278,7 +278,8 @@ def boundary_strength(features: RotatedFeatures, r0, c0, width_px, length_px, *,
 
 
 def side_step(features: RotatedFeatures, line_row, c0, c1, band, outward) -> np.ndarray:
-    """The step of Eq. (1) at a line, over columns ``[c0, c1)``: mean intensity in the band of ``band`` rows outside a window side minus that in the
+    """The step of Eq. (1) at a line, over columns ``[c0, c1)``: mean intensity in the band of
+    ``band`` rows outside a window side minus that in the
     band inside it; the side lies between rows ``line_row - 1`` and ``line_row`` and the
     outside is above it (``outward = -1``) or below it (``outward = +1``)."""
     above = _band_mean(features, line_row - band, line_row, c0, c1)

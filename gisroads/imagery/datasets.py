@@ -142,7 +142,7 @@ class BenchmarkImage:
     def dataset(self) -> str:
         return self.name.split("/")[0]
 
-    def crop(self, row: int, col: int, rows: int, cols: int) -> "BenchmarkImage":
+    def crop(self, row: int, col: int, rows: int, cols: int) -> BenchmarkImage:
         """The window ``[row:row+rows, col:col+cols]`` with its truth and valid area."""
         height, width = self.image.shape
         if not (0 <= row < height and 0 <= col < width and rows > 0 and cols > 0):

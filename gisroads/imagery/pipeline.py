@@ -171,7 +171,8 @@ def road_probability(image: GeoRaster, model="default", *, adapt: bool = True,
 
     The convolutional network (``"default"``, :func:`gisroads.learn.convnet.convnet_probability`)
     is applied as it is: ``adapt`` and ``context`` are for the boosted trees
-    (``"boosted"``). There ``adapt`` adapts the model to the image from its own most confident pixels first
+    (``"boosted"``). There ``adapt`` adapts the model to the image from its own most confident
+    pixels first
     (:func:`gisroads.learn.training.adapted_probability`, needs scikit-learn; without it
     the model is used as it is), taking as road samples only those of road colour
     (:func:`gisroads.imagery.baseline.road_colour_mask`), the naive baseline's cue: the
@@ -274,7 +275,8 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
         ``probability_threshold``; needs a model). Default: :data:`DEFAULT_METHOD` with a
         model, the papers' stages without one.
     probability_threshold : float, optional
-        See ``method``; by default the model's own (:func:`default_threshold`). With a model trained on a road layer the mask grows, by
+        See ``method``; by default the model's own (:func:`default_threshold`). With a model
+        trained on a road layer the mask grows, by
         hysteresis, into the pixels connected to it at :data:`LAYER_LOW_THRESHOLD` of it.
     tile_px : int
         The papers' stages run tile by tile on an image with more than ``2 * tile_px`` rows

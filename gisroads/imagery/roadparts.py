@@ -26,7 +26,8 @@ attribute and its centre line), :func:`filter_road_parts` (``passed``, ``reason`
 Centre line
     The segments' interiors (segment pixels whose four neighbours belong to the same
     segment) are skeletonised, each in its own window; on each segment's skeleton the
-    longest path (a double Dijkstra sweep over all skeletons at once) is its centre line. The tapering
+    longest path (a double Dijkstra sweep over all skeletons at once) is its centre line. The
+    tapering
     ends of that path, where it runs into the corners of the part, are trimmed (pixels
     whose distance to the border is below ``TAPER_FRACTION`` of the path's median, counted
     from each end), the rest is smoothed and extended at both ends by the local half width
@@ -372,7 +373,8 @@ def _measure(labels: np.ndarray, cues: ImageCues, edges: np.ndarray, transform: 
     centrelines = shapely.simplify(centrelines, 0.5 * pixel_m)
     # the smoothed line, not the 8-connected pixel path (7 % too long at 30 degrees)
     frame["length_m"] = shapely.length(centrelines)
-    columns = SEGMENT_COLUMNS + ["road_probability"] + [f"mean_b{band}" for band in range(1, len(cues.bands) + 1)]
+    columns = (SEGMENT_COLUMNS + ["road_probability"]
+               + [f"mean_b{band}" for band in range(1, len(cues.bands) + 1)])
     out = gpd.GeoDataFrame({c: frame[c] for c in columns},
                            geometry=gpd.GeoSeries(polygons, crs=crs), crs=crs)
     out["centreline"] = gpd.GeoSeries(centrelines, crs=crs)

@@ -186,7 +186,7 @@ class GeoPackageWriter:
         self._atomic = None
         self._tmp: Path | None = None
 
-    def __enter__(self) -> "GeoPackageWriter":
+    def __enter__(self) -> GeoPackageWriter:
         self._atomic = atomic_path(self.path)
         self._tmp = self._atomic.__enter__()
         return self
@@ -277,7 +277,7 @@ def read_layer(path, layer: str | None = None, *, crs=None) -> gpd.GeoDataFrame:
         layer = "road_centrelines" if "road_centrelines" in names else names[0]
     try:
         frame = gpd.read_file(path, layer=layer) if layer else gpd.read_file(path)
-    except Exception as err:  # noqa: BLE001: pyogrio's and Fiona's errors share no base
+    except Exception as err:  # noqa: BLE001  (pyogrio's and Fiona's errors share no base)
         if not type(err).__module__.startswith(("pyogrio", "fiona")):
             raise
         raise GisroadsError(f"{path}: not a readable vector file "

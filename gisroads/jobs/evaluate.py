@@ -16,7 +16,7 @@ from ..synthetic import make_scene, render_image, write_cloud
 from .common import stage_default
 
 
-def synth_job(out_dir, *, size_m=stage_default(make_scene, "size_m"),
+def synth_job(out_dir, *, size_m: tuple[float, float] = stage_default(make_scene, "size_m"),
               seed: int = stage_default(make_scene, "seed"),
               density_per_m2: float = stage_default(write_cloud, "density_per_m2"),
               pixel_m: float = stage_default(render_image, "pixel_m"), cloud: bool = True,

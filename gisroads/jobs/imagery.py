@@ -38,7 +38,8 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     probability as a float32 GeoTIFF (band ``road_probability``, 0-1, NaN no data) on the
     grid the image was worked on (its UTM zone for a geographic image). ``model``:
     ``"default"`` (the convolutional network), ``"boosted"`` (the boosted trees), a model
-    file of :func:`train_job` (.onnx or .npz), or ``"none"`` (the papers' pipeline alone). ``context``: the context model that re-scores the probability on the
+    file of :func:`train_job` (.onnx or .npz), or ``"none"`` (the papers' pipeline alone).
+    ``context``: the context model that re-scores the probability on the
     probability path (:func:`gisroads.imagery.pipeline.resolve_context`: ``"default"``,
     ``"none"`` or a model file). The parameters from ``method`` on are those of
     :func:`gisroads.imagery.pipeline.extract_image_roads`. An image without roads gives

@@ -18,7 +18,8 @@ narrow range that inflates every contrast) and cost 0.06 of mean held-out pixel 
 (DeepGlobe 0.40 against 0.71). Colour enters only as ratios of the recorded bands
 (chromaticity, saturation, excess green), independent of exposure; balancing the bands to
 grey first was tried and dropped (Massachusetts pixel AUC 0.57 against 0.77: it turns a
-desert or a field grey, the colour of roads). See the model card for every figure. A one-band (panchromatic) image has
+desert or a field grey, the colour of roads). See the model card for every figure. A one-band
+(panchromatic) image has
 chromaticity 1/3 and saturation 0; bands past the third are ignored.
 
 Features (names as in :func:`feature_names`), for each ``s`` in :data:`SCALES_M`:
@@ -334,9 +335,9 @@ def _line_means(z: np.ndarray, pixel_m: float, angle: float, lengths_m=None
                for target in lengths_m]
     # a centred line is the line starting (l - 1) / 2 behind the pixel; z is padded with its
     # edge values behind, so that a line near the border reads repeated pixels there, as a
-    # centred kernel would, and not a line starting at the border and reaching l inward
+    # centred kernel would, and not a line starting at the border and reaching its length inward
     # (further than a tile's halo)
-    behind = [np.round(-(l - 1) / 2 * step).astype(int) for l in lengths]
+    behind = [np.round(-(length - 1) / 2 * step).astype(int) for length in lengths]
     pad = [(max(0, -d), max(0, d)) for d in behind[-1]]
     padded = np.pad(z, pad, mode="edge")
     taps = max(1, int(round(length)))

@@ -443,6 +443,129 @@ def median_cells(paved: np.ndarray, kerb: np.ndarray, cell_m: float, *,
     return long[labels]
 
 
+def _ground_planes(xyz: np.ndarray, window_sum, sigma_plane: float, cell_m: float
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Residual (metres) and gradient of a least-squares plane fitted to the ground returns
+    in each cell's window; NaN where the window holds too few returns to fit one.
+
+    ``xyz`` are the points about a local origin; ``window_sum(values)`` sums values of the
+    ground returns over each cell's window (``window_sum(None)``: their count)."""
+    gx, gy, gz = xyz.T
+    n = window_sum(None)
+    enough = n * 2 * np.pi * sigma_plane ** 2 >= 5.0  # ground returns in the window
+    mean = {name: _ratio(window_sum(v), n) for name, v in (
+        ("x", gx), ("y", gy), ("z", gz), ("xx", gx * gx), ("xy", gx * gy), ("yy", gy * gy),
+        ("xz", gx * gz), ("yz", gy * gz), ("zz", gz * gz))}
+    cxx = mean["xx"] - mean["x"] ** 2
+    cxy = mean["xy"] - mean["x"] * mean["y"]
+    cyy = mean["yy"] - mean["y"] ** 2
+    cxz = mean["xz"] - mean["x"] * mean["z"]
+    cyz = mean["yz"] - mean["y"] * mean["z"]
+    czz = mean["zz"] - mean["z"] ** 2
+    det = cxx * cyy - cxy ** 2
+    enough &= det > (0.05 * cell_m) ** 4
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = (cyy * cxz - cxy * cyz) / det
+        b = (cxx * cyz - cxy * cxz) / det
+        residual = np.sqrt(np.clip(czz - a * cxz - b * cyz, 0.0, None))
+    residual[~enough] = np.nan
+    gradient = np.hypot(a, b)
+    gradient[~enough] = np.nan
+    return residual, gradient
+
+
+def _combined_likelihood(memberships: dict, rule: EvidenceRule, shape) -> np.ndarray:
+    """The rule's road likelihood from the cues' memberships: the gates multiply, the
+    graded cues enter as a weighted geometric mean (a cue unknown in a cell is left out
+    there)."""
+    weights = dict(rule.weights)
+    total = np.zeros(shape)
+    weight = np.zeros(shape)
+    gate = np.ones(shape)
+    for name, member in memberships.items():
+        known = np.isfinite(member)
+        if name in rule.gates:
+            gate[known] *= member[known]
+        else:
+            w = weights.get(name, 0.0)
+            total[known] += w * np.log(np.maximum(member[known], 1e-6))
+            weight[known] += w
+    graded = np.exp(_ratio(total, weight))
+    return np.where(np.isnan(graded), gate, gate * graded)
+
+
+def _ground_intensity(cloud: PointCloud, ground: np.ndarray, cell: np.ndarray,
+                      occupied: np.ndarray, references: EvidenceReferences | None,
+                      ground_mean) -> tuple:
+    """Mean intensity of the ground returns per cell over that of the bright ground.
+
+    Split returns are first brought to the single-return scale. ``ground_mean(values)``
+    averages values of the ground returns over each cell's neighbourhood.
+
+    Returns
+    -------
+    relative : ndarray or None
+        None when the file has no intensity or it has no contrast.
+    text : str
+        What was measured, or why nothing was.
+    bright : float or None
+        Intensity of the bright ground (the 90th percentile of the cells').
+    share : float
+        Intensity of a split return over a single one (1 when there are none).
+    """
+    if cloud.intensity is None:
+        return None, "the file records no intensity", None, 1.0
+    value = np.asarray(cloud.intensity, np.float64)
+    single = np.asarray(cloud.number_of_returns) <= 1
+    share, note = 1.0, ""
+    if (~single).any() and single.any():
+        share = references.split_share if references is not None else split_share(
+            value, single, ground, cell)
+        value = np.where(single, value, value / share)
+        note = f", split returns / {share:.2f}"
+    mean_intensity = ground_mean(value)
+    has = np.isfinite(mean_intensity) & occupied
+    if references is not None and references.bright_intensity is not None:
+        dark, bright = 0.0, references.bright_intensity
+    elif has.any():
+        dark, bright = (float(v) for v in np.percentile(mean_intensity[has], [10, 90]))
+    else:
+        dark = bright = 0.0
+    if not bright > 0 or dark >= 0.95 * bright:
+        return None, ("the ground intensity has no contrast (10th and 90th percentiles "
+                      "within 5 %)"), None, share
+    return (mean_intensity / bright,
+            f"ground intensity over the bright ground ({bright:.0f}{note})", bright, share)
+
+
+def _class_membership(classes: np.ndarray, low_points: np.ndarray, count_near) -> tuple:
+    """Share of the low returns near each cell in a class that is not road, the
+    classification's membership, and what it used. ``count_near(mask)``: the returns of
+    ``mask`` over each cell's neighbourhood."""
+    n_low = count_near(low_points)
+    bad = _ratio(count_near(low_points & np.isin(classes, NOT_ROAD_CLASSES)), n_low)
+    member = 1.0 - bad
+    note = "ground classes 2, 11, 17; low classes 3, 6, 9 are not road"
+    road_points = low_points & (classes == ROAD_SURFACE_CLASS)
+    if road_points.any():
+        member = member * (0.3 + 0.7 * _ratio(count_near(road_points), n_low))
+        note += "; road surface class 11"
+    return bad, member, note
+
+
+def _cell_grid(x: np.ndarray, y: np.ndarray, bounds, cell_m: float | None) -> tuple:
+    """Transform, shape and cell side (metres) of the evidence grid over ``bounds`` (default:
+    the points'); the cell side by default from the density of the points inside."""
+    if bounds is None:
+        bounds = (x.min(), y.min(), x.max(), y.max())
+    if cell_m is None:
+        area = max((bounds[2] - bounds[0]) * (bounds[3] - bounds[1]), 1.0)
+        count = ((x >= bounds[0]) & (x <= bounds[2]) & (y >= bounds[1]) & (y <= bounds[3]))
+        cell_m = auto_cell_m(int(count.sum()), area)
+    transform, shape = image_grid(bounds, cell_m)
+    return transform, shape, cell_m
+
+
 def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None,
                   rule: EvidenceRule = EvidenceRule(), use_classification: bool = True,
                   ground_tolerance_m: float = 0.25,
@@ -479,13 +602,7 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
     x, y, z = xyz.T
     classes = np.asarray(cloud.classification)
     classified = use_classification and bool((classes == GROUND_CLASS).any())
-    if bounds is None:
-        bounds = (x.min(), y.min(), x.max(), y.max())
-    if cell_m is None:
-        area = max((bounds[2] - bounds[0]) * (bounds[3] - bounds[1]), 1.0)
-        count = ((x >= bounds[0]) & (x <= bounds[2]) & (y >= bounds[1]) & (y <= bounds[3]))
-        cell_m = auto_cell_m(int(count.sum()), area)
-    transform, (rows, cols) = image_grid(bounds, cell_m)
+    transform, (rows, cols), cell_m = _cell_grid(x, y, bounds, cell_m)
     size = rows * cols
     col = np.floor((x - transform.c) / cell_m).astype(np.int64)
     row = np.floor((transform.f - y) / cell_m).astype(np.int64)
@@ -561,29 +678,10 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
         missing["pulses"] = "no pulse density"
 
     # roughness and slope: a plane fitted to the ground returns in the plane window
-    origin = np.array([transform.c, transform.f, np.median(z[ground]) if ground.any() else 0])
-    gx, gy, gz = (xyz[:, k] - origin[k] for k in range(3))
-    sums = {name: _smooth(grid(v, ground), sigma_plane) for name, v in (
-        ("x", gx), ("y", gy), ("z", gz), ("xx", gx * gx), ("xy", gx * gy), ("yy", gy * gy),
-        ("xz", gx * gz), ("yz", gy * gz), ("zz", gz * gz))}
-    n = _smooth(n_ground, sigma_plane)
-    enough = n * 2 * np.pi * sigma_plane ** 2 >= 5.0  # ground returns in the window
-    mean = {k: _ratio(sums[k], n) for k in sums}
-    cxx = mean["xx"] - mean["x"] ** 2
-    cxy = mean["xy"] - mean["x"] * mean["y"]
-    cyy = mean["yy"] - mean["y"] ** 2
-    cxz = mean["xz"] - mean["x"] * mean["z"]
-    cyz = mean["yz"] - mean["y"] * mean["z"]
-    czz = mean["zz"] - mean["z"] ** 2
-    det = cxx * cyy - cxy ** 2
-    enough &= det > (0.05 * cell_m) ** 4
-    with np.errstate(invalid="ignore", divide="ignore"):
-        a = (cyy * cxz - cxy * cyz) / det
-        b = (cxx * cyz - cxy * cxz) / det
-        residual = np.sqrt(np.clip(czz - a * cxz - b * cyz, 0.0, None))
-    residual[~enough] = np.nan
-    gradient = np.hypot(a, b)
-    gradient[~enough] = np.nan
+    residual, gradient = _ground_planes(
+        xyz - [transform.c, transform.f, np.median(z[ground]) if ground.any() else 0.0],
+        lambda values: _smooth(grid(values, ground), sigma_plane), sigma_plane, cell_m)
+    enough = np.isfinite(residual)
     if references is not None:
         floor = references.noise_floor_m
     else:
@@ -596,36 +694,16 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
     used["slope"] = "plane gradient"
 
     # intensity of the ground returns
-    share, bright = 1.0, None
-    if cloud.intensity is None:
-        missing["intensity"] = "the file records no intensity"
+    relative, text, bright, share = _ground_intensity(
+        cloud, ground, cell, occupied, references,
+        lambda values: _ratio(_smooth(grid(values, ground), sigma_local),
+                              _smooth(n_ground, sigma_local)))
+    if relative is None:
+        missing["intensity"] = text
     else:
-        value = np.asarray(cloud.intensity, np.float64)
-        single = np.asarray(cloud.number_of_returns) <= 1
-        if (~single).any() and single.any():
-            share = references.split_share if references is not None else split_share(
-                value, single, ground, cell)
-            value = np.where(single, value, value / share)
-            note = f", split returns / {share:.2f}"
-        else:
-            note = ""
-        mean_intensity = _ratio(_smooth(grid(value, ground), sigma_local),
-                                _smooth(n_ground, sigma_local))
-        has = np.isfinite(mean_intensity) & occupied
-        if references is not None and references.bright_intensity is not None:
-            dark, bright = 0.0, references.bright_intensity
-        elif has.any():
-            dark, bright = (float(v) for v in np.percentile(mean_intensity[has], [10, 90]))
-        else:
-            dark = bright = 0.0
-        if not bright > 0 or dark >= 0.95 * bright:
-            missing["intensity"] = "the ground intensity has no contrast (10th and 90th " \
-                                   "percentiles within 5 %)"
-            bright = None
-        else:
-            measures["intensity"] = mean_intensity / bright
-            memberships["intensity"] = ramp(measures["intensity"], *rule.intensity)
-            used["intensity"] = f"ground intensity over the bright ground ({bright:.0f}{note})"
+        measures["intensity"] = relative
+        memberships["intensity"] = ramp(relative, *rule.intensity)
+        used["intensity"] = text
 
     # returns: share of returns from multi-return pulses
     multi = np.asarray(cloud.number_of_returns) > 1
@@ -642,20 +720,9 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
         missing["classification"] = ("not asked for" if not use_classification
                                      else "the file has no ground class (2)")
     else:
-        low_points = inside & (height <= rule.height_m[1])
-        n_low = _smooth(grid(None, low_points), sigma_local)
-        bad = _ratio(_smooth(grid(None, low_points & np.isin(classes, NOT_ROAD_CLASSES)),
-                             sigma_local), n_low)
-        member = 1.0 - bad
-        note = "ground classes 2, 11, 17; low classes 3, 6, 9 are not road"
-        road_points = low_points & (classes == ROAD_SURFACE_CLASS)
-        if road_points.any():
-            road_share = _ratio(_smooth(grid(None, road_points), sigma_local), n_low)
-            member = member * (0.3 + 0.7 * road_share)
-            note += "; road surface class 11"
-        measures["classification"] = bad
-        memberships["classification"] = member
-        used["classification"] = note
+        measures["classification"], memberships["classification"], used["classification"] \
+            = _class_membership(classes, inside & (height <= rule.height_m[1]),
+                                lambda points: _smooth(grid(None, points), sigma_local))
 
     # kerbs: medians and islands between two carriageways, on the likelihood of the others
     if cell_m > 1.0:
@@ -666,20 +733,7 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
         measures["kerbs"] = steps
         used["kerbs"] = f"medians between carriageways (ground steps >= {KERB_GRADIENT})"
 
-    weights = dict(rule.weights)
-    total = np.zeros((rows, cols))
-    weight = np.zeros((rows, cols))
-    gate = np.ones((rows, cols))
-    for name, member in memberships.items():
-        known = np.isfinite(member)
-        if name in rule.gates:
-            gate[known] *= member[known]
-        else:
-            w = weights.get(name, 0.0)
-            total[known] += w * np.log(np.maximum(member[known], 1e-6))
-            weight[known] += w
-    graded = np.exp(_ratio(total, weight))
-    likelihood = np.where(np.isnan(graded), gate, gate * graded)
+    likelihood = _combined_likelihood(memberships, rule, (rows, cols))
     if "kerbs" in measures:
         median = median_cells(likelihood >= PAVED_LIKELIHOOD,
                               np.nan_to_num(measures["kerbs"]) >= KERB_GRADIENT, cell_m)

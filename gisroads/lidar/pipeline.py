@@ -22,7 +22,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from functools import lru_cache, partial
 from pathlib import Path
-from typing import Iterator, NamedTuple
+from typing import NamedTuple
+from collections.abc import Iterator
 
 from affine import Affine
 import geopandas as gpd
@@ -682,8 +683,9 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = TILE_M,
         parallel = dict(workers=workers, scheduler=scheduler, work_dir=work_dir)
         if cue == "evidence":
             roads = _evidence_roads(path, threshold=threshold, network_options=network_options,
-                                    model=model, progress=progress, tile_m=tile_m, overlap_m=overlap_m,
-                                    cell_m=cell_m, min_points=min_points, **parallel)
+                                    model=model, progress=progress, tile_m=tile_m,
+                                    overlap_m=overlap_m, cell_m=cell_m, min_points=min_points,
+                                    **parallel)
             tiled = TiledRoads(roads.network, cue, tiles=[], files=[], levels=0, imaged=False,
                                evidence=roads.evidence,
                                ground_intensity=roads.ground_intensity, cues=roads.cues,

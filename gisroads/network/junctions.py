@@ -1,7 +1,8 @@
 """Network generation: road strings to a road network (Grote & Rottensteiner 2010, Sec. 2.3).
 
 The last stage of every road network, whatever the evidence (the image pipeline, any road
-raster through :mod:`gisroads.network.rasters`, the LiDAR pipeline). Its input are the road strings of the subgraph
+raster through :mod:`gisroads.network.rasters`, the LiDAR pipeline). Its input are the road strings
+of the subgraph
 evaluation (one LineString per string, ``width_m``, ``quality``), its output the road-network
 contract (:class:`gisroads.geo.RoadNetwork`) plus the QA layer ``junction_connections``.
 

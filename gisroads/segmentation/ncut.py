@@ -339,7 +339,7 @@ class _Borders:
     pair: np.ndarray
 
     @classmethod
-    def of(cls, superpixels: np.ndarray, n_superpixels: int) -> "_Borders":
+    def of(cls, superpixels: np.ndarray, n_superpixels: int) -> _Borders:
         cols = superpixels.shape[1]
         pixel_pairs = []
         for here, there, step in ((superpixels[:, :-1], superpixels[:, 1:], 1),

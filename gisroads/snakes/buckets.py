@@ -7,7 +7,7 @@ map's samples are kept, so a file of any size is streamed through a small workin
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 from scipy.spatial import cKDTree

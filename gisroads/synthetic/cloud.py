@@ -20,7 +20,7 @@ ramps, which stand on embankments), 17 bridge deck, 6 building, 5 high vegetatio
 """
 from __future__ import annotations
 
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 import shapely

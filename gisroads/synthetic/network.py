@@ -399,6 +399,89 @@ def _place_cul_de_sac(rng, row: _Road, x_start: float, side: int, depth_m: float
     return lane
 
 
+def _first_vertical(rng, x: float, ymin: float, ymax: float, foot: _Road, *, dual: bool
+                    ) -> tuple[list[_Road], float]:
+    """The first south-north road at ``x``, a dual carriageway or a street, ending on the
+    foot road, and its half width from the axis to its outer edge, metres."""
+    if dual:
+        w_c = rng.uniform(7.0, 8.0)
+        separation = w_c + rng.uniform(3.5, 5.0)
+        roads = []
+        for side, name in ((-1, "dual_carriageway_a"), (1, "dual_carriageway_b")):
+            x_side = x + side * separation / 2
+            xy = _end_on(np.array([[x_side, ymin], [x_side, ymax + 50]]), foot)
+            roads.append(_Road(name, xy, w_c))
+        return roads, separation / 2 + w_c / 2
+    w_0 = rng.uniform(8.0, 10.0)
+    xy = _end_on(np.array([[x, ymin], [x, ymax + 50]]), foot)
+    return [_Road("street", xy, w_0, kerb_parking=True)], w_0 / 2
+
+
+def _diagonal(rng, x_west: float, avenue_y: float, avenue: _Road, curved_street: _Road,
+              next_row: _Road) -> list[_Road]:
+    """A diagonal street from the avenue, east of ``x_west``, to the curved street, at the
+    steepest angle that meets it well below the next row (none if no angle does)."""
+    start_x = x_west + rng.uniform(22, 30)
+    for theta in np.radians(np.arange(rng.uniform(35, 50), 24, -5.0)):
+        ray = np.array([[start_x, avenue_y],
+                        [start_x + 500 * np.cos(theta), avenue_y + 500 * np.sin(theta)]])
+        hit = shapely.intersection(shapely.linestrings(ray), curved_street.line)
+        if shapely.is_empty(hit):
+            continue
+        end = shapely.get_coordinates(hit)
+        end = end[np.argmin(end[:, 1])]
+        if end[1] < np.interp(end[0], next_row.xy[:, 0], next_row.xy[:, 1]) - 25:
+            xy = _end_on(np.vstack([_start_on(avenue, start_x), ray[1]]), curved_street)
+            return [_Road("diagonal", xy, rng.uniform(6.5, 8.0))]
+    return []
+
+
+def _vertical_streets(rng, i: int, vertical, bridge_edges, has_rows: bool, ymax: float,
+                      foot: _Road) -> list[_Road]:
+    """The streets of vertical ``i`` (the curved street when ``i`` is 1): its node chain,
+    with some inner segments dropped (T junctions) where no special feature needs them."""
+    curved = i == 1 or rng.random() < 0.3
+    width = rng.uniform(7.5, 10.0) if i == 1 else rng.uniform(6.0, 11.0)
+    chain = vertical(i)
+    amplitude = rng.uniform(6, 10) if i == 1 else rng.uniform(4, 8)
+    keep = np.ones(len(chain) - 1, bool)
+    if i > 1 and i not in bridge_edges and has_rows:
+        keep[1:-1] = rng.random(len(chain) - 3) > 0.2
+    pieces, start = [], 0
+    for k in range(len(keep) + 1):
+        if k == len(keep) or not keep[k]:
+            if k > start:
+                pieces.append(chain[start:k + 1])
+            start = k + 1
+    trees, parking = rng.random() < 0.4, rng.random() < 0.6
+    streets = []
+    for piece in pieces:
+        xy = _bulge(piece, amplitude) if curved else piece
+        if piece[-1, 1] > ymax:
+            xy = _end_on(xy, foot)
+        streets.append(_Road("curved_street" if curved else "street", xy, width,
+                             street_trees=trees, kerb_parking=parking))
+    return streets
+
+
+def _place_extras(extras, rows, node_x, bridge_edges, features, roads, lots) -> None:
+    """A few more cul-de-sacs and parking lots in big scenes, each in its own block."""
+    for j, row in enumerate(rows):
+        for i in range(1, len(node_x) - 1):
+            if i in bridge_edges or i + 1 in bridge_edges:
+                continue
+            x_mid = 0.5 * (node_x[i, j] + node_x[i + 1, j])
+            draw = extras.random()
+            if draw < 0.06 and "cul_de_sac" in features:
+                depth = extras.uniform(40, 55)
+                lane = _place_cul_de_sac(extras, row, x_mid, 1, depth,
+                                         extras.uniform(-0.2, 0.2) * depth, roads, lots)
+                if lane is not None:
+                    roads.append(lane)
+            elif 0.06 <= draw < 0.12 and "parking" in features:
+                _place_parking(extras, row, x_mid, 1, roads, lots)
+
+
 def _layout_roads(seed, origin, size, features) -> tuple[list[_Road], _Frame]:
     rng = _stable_seed(seed, "roads")
     xmin, ymin = origin
@@ -459,8 +542,11 @@ def _layout_roads(seed, origin, size, features) -> tuple[list[_Road], _Frame]:
                             [xmax, ends[1]]])
     roads += rows
 
-    def vertical(i, x_bottom, top_overshoot=20.0):
-        """Node chain of vertical ``i`` from the lower border past the foot road."""
+    def vertical(i, x_bottom=None, top_overshoot=20.0):
+        """Node chain of vertical ``i`` from the lower border (by default a few metres
+        beside its first node) past the foot road."""
+        if x_bottom is None:
+            x_bottom = node_x[i, 0] + rng.uniform(-6, 6)
         nodes = np.column_stack([node_x[i], node_y[i]])
         top = [nodes[-1, 0] + rng.uniform(-6, 6), ymax + top_overshoot]
         return np.vstack([[x_bottom, ymin], nodes, top])
@@ -473,60 +559,18 @@ def _layout_roads(seed, origin, size, features) -> tuple[list[_Road], _Frame]:
     bridge_x = bridge_lo + rng.uniform(0.45, 0.55) * (bridge_hi - bridge_lo)
     bridge_edges = {i for i, x in enumerate(xs) if x in (bridge_lo, bridge_hi)}
 
-    if "dual_carriageway" in features:
-        w_c = rng.uniform(7.0, 8.0)
-        separation = w_c + rng.uniform(3.5, 5.0)
-        for side, name in ((-1, "dual_carriageway_a"), (1, "dual_carriageway_b")):
-            x = xs[0] + side * separation / 2
-            xy = _end_on(np.array([[x, ymin], [x, ymax + 50]]), foot)
-            roads.append(_Road(name, xy, w_c))
-        half_axis = separation / 2 + w_c / 2
-    else:
-        w_0 = rng.uniform(8.0, 10.0)
-        xy = _end_on(np.array([[xs[0], ymin], [xs[0], ymax + 50]]), foot)
-        roads.append(_Road("street", xy, w_0, kerb_parking=True))
-        half_axis = w_0 / 2
+    axis, half_axis = _first_vertical(rng, xs[0], ymin, ymax, foot,
+                                      dual="dual_carriageway" in features)
+    roads += axis
 
     for i in range(1, len(xs)):
-        curved = i == 1 or rng.random() < 0.3
-        width = rng.uniform(7.5, 10.0) if i == 1 else rng.uniform(6.0, 11.0)
-        chain = vertical(i, node_x[i, 0] + rng.uniform(-6, 6))
-        amplitude = rng.uniform(6, 10) if i == 1 else rng.uniform(4, 8)
-        # Drop some inner segments (T junctions) where no special feature depends on them.
-        keep = np.ones(len(chain) - 1, bool)
-        if i > 1 and i not in bridge_edges and len(rows) > 1:
-            keep[1:-1] = rng.random(len(chain) - 3) > 0.2
-        pieces, start = [], 0
-        for k in range(len(keep) + 1):
-            if k == len(keep) or not keep[k]:
-                if k > start:
-                    pieces.append(chain[start:k + 1])
-                start = k + 1
-        trees, parking = rng.random() < 0.4, rng.random() < 0.6
-        for piece in pieces:
-            xy = _bulge(piece, amplitude) if curved else piece
-            if piece[-1, 1] > ymax:
-                xy = _end_on(xy, foot)
-            roads.append(_Road("curved_street" if curved else "street", xy, width,
-                               street_trees=trees, kerb_parking=parking))
+        roads += _vertical_streets(rng, i, vertical, bridge_edges, len(rows) > 1, ymax, foot)
     curved_street = next(r for r in roads if r.name == "curved_street")
 
     lots: list = []
     if "diagonal" in features:
-        start_x = xs[0] + half_axis + rng.uniform(22, 30)
-        next_row = rows[1] if len(rows) > 1 else foot
-        for theta in np.radians(np.arange(rng.uniform(35, 50), 24, -5.0)):
-            ray = np.array([[start_x, avenue_y],
-                            [start_x + 500 * np.cos(theta), avenue_y + 500 * np.sin(theta)]])
-            hit = shapely.intersection(shapely.linestrings(ray), curved_street.line)
-            if shapely.is_empty(hit):
-                continue
-            end = shapely.get_coordinates(hit)
-            end = end[np.argmin(end[:, 1])]
-            if end[1] < np.interp(end[0], next_row.xy[:, 0], next_row.xy[:, 1]) - 25:
-                xy = _end_on(np.vstack([_start_on(avenue, start_x), ray[1]]), curved_street)
-                roads.append(_Road("diagonal", xy, rng.uniform(6.5, 8.0)))
-                break
+        roads += _diagonal(rng, xs[0] + half_axis, avenue_y, avenue, curved_street,
+                           rows[1] if len(rows) > 1 else foot)
 
     if "cul_de_sac" in features:
         depth = avenue.width_m / 2 + rng.uniform(48, 56)
@@ -559,22 +603,8 @@ def _layout_roads(seed, origin, size, features) -> tuple[list[_Road], _Frame]:
         lower = avenue
         roads.append(road)
 
-    # A few more cul-de-sacs and parking lots in big scenes, each in its own block.
-    extras = _stable_seed(seed, "extras")
-    for j, row in enumerate(rows):
-        for i in range(1, len(xs) - 1):
-            if i in bridge_edges or i + 1 in bridge_edges:
-                continue
-            x_mid = 0.5 * (node_x[i, j] + node_x[i + 1, j])
-            draw = extras.random()
-            if draw < 0.06 and "cul_de_sac" in features:
-                depth = extras.uniform(40, 55)
-                lane = _place_cul_de_sac(extras, row, x_mid, 1, depth,
-                                         extras.uniform(-0.2, 0.2) * depth, roads, lots)
-                if lane is not None:
-                    roads.append(lane)
-            elif 0.06 <= draw < 0.12 and "parking" in features:
-                _place_parking(extras, row, x_mid, 1, roads, lots)
+    _place_extras(_stable_seed(seed, "extras"), rows, node_x, bridge_edges, features, roads,
+                  lots)
 
     frame = _Frame(lots=lots, cliff_line=cliff_line,
                    cliff_height_m=cliff_height if has_cliff else 0.0, cliff_slope_m=slope_m,
@@ -736,7 +766,7 @@ class PaintTable:
     crown_depth_m: np.ndarray
 
     @classmethod
-    def build(cls, background: dict, groups: list[tuple]) -> "PaintTable":
+    def build(cls, background: dict, groups: list[tuple]) -> PaintTable:
         """``groups``: (geometries, column values: scalars or arrays) in painter's order."""
         names = [f for f in cls.__dataclass_fields__ if f != "geometry"]
         defaults = dict(material=0, kind=0, base=0, ramp=-1, top_z=np.nan, tone=0.5,
@@ -878,7 +908,7 @@ class Scene:
         return RoadNetwork(net.centrelines, net.polygons, junctions, net.qa)
 
     @cached_property
-    def areas(self) -> "Areas":
+    def areas(self) -> Areas:
         """Prepared unions of the truth polygons by level (see :class:`Areas`)."""
         polygons = self.truth.polygons
         road_id = polygons["road_id"].to_numpy()
@@ -1147,9 +1177,9 @@ def _left(tangent):
     return np.column_stack([-tangent[:, 1], tangent[:, 0]])
 
 
-def _markings(rng, roads: list[_Road], lines, polys, zones, decks, extent):
-    """Zebra crossings near some junctions, then dashed lane lines clear of junctions."""
-    widths = np.array([r.width_m for r in roads])
+def _crossing_sites(roads: list[_Road], widths: np.ndarray) -> list:
+    """(road index, station along it) of each possible zebra crossing's centre: on each arm
+    of a junction, clear of the crossing roads."""
     edges = _edge_slices([r.xy for r in roads])
     pieces = [shapely.linestrings(roads[i].xy[a:b + 1]) for i, a, b in edges]
     nodes, degree = line_end_degrees(pieces)
@@ -1171,6 +1201,13 @@ def _markings(rng, roads: list[_Road], lines, polys, zones, decks, extent):
                 station = at_vertex[k] + sign * reach
                 if 1.5 <= station <= at_vertex[-1] - 1.5:
                     sites.append((i, station))
+    return sites
+
+
+def _markings(rng, roads: list[_Road], lines, polys, zones, decks, extent):
+    """Zebra crossings near some junctions, then dashed lane lines clear of junctions."""
+    widths = np.array([r.width_m for r in roads])
+    sites = _crossing_sites(roads, widths)
     valid = []  # (road index, centre, tangent, band) of crossings clear of other roads
     for i, station in sites:
         centre = shapely.get_coordinates(shapely.line_interpolate_point(lines[i], station))[0]

@@ -108,7 +108,8 @@ class EvaluateRoadNetwork(GisroadsAlgorithm):
             qa = match_layers(extracted, reference, buffer_m=buffer_m, valid_area=valid)
         feedback.pushInfo(format_report(results))
         outputs = {name: results[group][key] for name, (group, key) in HEADLINE.items()}
-        for param, layer in (("EXTRACTED_QA", "eval_extracted"), ("REFERENCE_QA", "eval_reference")):
+        for param, layer in (("EXTRACTED_QA", "eval_extracted"),
+                             ("REFERENCE_QA", "eval_reference")):
             outputs[param] = frame_to_sink(self, parameters, param, context, qa[layer],
                                            "LineString", feedback)
             style_on_load(context, outputs[param], layer)

@@ -135,7 +135,7 @@ def test_info_of_an_empty_layer_shows_its_declared_geometry(tmp_path):
     assert "junctions: 0 features, Point (declared), CRS RGF93 v1 / Lambert-93 (EPSG 2154), " \
            "no extent" in text.stdout.splitlines()
     layers = json.loads(gisroads("info", "--json", tmp_path / "n.gpkg").stdout)["layers"]
-    assert [(l["layer"], l["geometry"]) for l in layers] == [
+    assert [(layer["layer"], layer["geometry"]) for layer in layers] == [
         ("road_centrelines", ["LineString"]), ("junctions", ["Point"])]
 
 

@@ -293,7 +293,8 @@ def test_perfect_segments_of_a_synthetic_scene():
         road = is_road.reindex(segments.segment_id).to_numpy()
         shares[name] = (segments.passed[road].mean(), (~segments.passed[~road]).mean(),
                         seconds)
-        print(name, "road parts passing %.2f, non-road failing %.2f, %.1f s" % shares[name],
+        print(name, "road parts passing {:.2f}, non-road failing {:.2f}, {:.1f} s".format(
+            *shares[name]),
               segments[road].reason.value_counts().to_dict())
         assert result.cues["cues"] == name
     # the truth's roads of 3-16 m pass unless short between junctions, under street-tree

@@ -1,5 +1,4 @@
 import io
-import shutil
 import struct
 
 import laspy
@@ -259,7 +258,8 @@ def test_writer_round_trip_with_crs(tmp_path):
     path = tmp_path / "w.laz"
     with LasPointWriter(path, crs=CRS("EPSG:32633"), offset=(500000, 4500000, 0)) as w:
         for part in np.array_split(np.arange(len(xyz)), 3):
-            w.write(xyz[part], intensity=np.full(len(part), 7), classification=np.full(len(part), 2))
+            w.write(xyz[part], intensity=np.full(len(part), 7),
+                    classification=np.full(len(part), 2))
     cloud = read_las(path)
     assert len(cloud) == 20000 and cloud.crs.to_epsg() == 32633
     np.testing.assert_allclose(cloud.xyz, xyz, atol=0.0006)

@@ -180,7 +180,7 @@ def test_averaged_views_make_the_probability_turn_with_the_image(bundled,
     alone = convnet_probability(image, bundled, views=1).data
     averaged = convnet_probability(image, bundled, views=views).data
     for flip_rows, flip_cols in turns:
-        def turn(array):
+        def turn(array, flip_rows=flip_rows, flip_cols=flip_cols):
             return array[..., ::-1 if flip_rows else 1, ::-1 if flip_cols else 1]
         turned = _like(image, np.ascontiguousarray(turn(image.data)))
         # the network alone is not equivariant; the average over the views is

@@ -90,7 +90,8 @@ def test_adapted_probability_equals_the_adapted_model_predicted(holed_image, sce
 
 def test_default_adaptation_is_the_own_model_fitted_on_samples_chosen_every_second_pixel(
         holed_image, scene_model, feature_calls, monkeypatch):
-    """Weight 1 (the default for the bundled model): the image's own model alone, its samples chosen from the
+    """Weight 1 (the default for the bundled model): the image's own model alone, its samples
+    chosen from the
     bundled model's log-odds on every second pixel, which the bundled model's trees see
     alone; features once per tile; without an own model, the bundled model's probability
     at every pixel."""

@@ -135,7 +135,9 @@ def test_greedy_takes_the_big_set_first_exact_does_not():
 def test_width_competition(band_20m, band_10m, expected):
     hyp = hypotheses([box(0, -10, 100, 10), box(0, 0, 100, 10), box(0, -10, 100, 0)],
                      width_index=[1, 0, 0])
-    road = lambda level: (lambda x: np.where((x > 0) & (x < 100), level, 0.0))
+    def road(level):
+        return lambda x: np.where((x > 0) & (x < 100), level, 0.0)
+
     b20, where = along_x(road(band_20m), x1=102)
     b10, _ = along_x(road(band_10m), x1=102)
     lik = raster([b10, b20], **where)
@@ -187,9 +189,9 @@ def random_instance(seed):
     length = rng.uniform(10, 40, n)
     theta = rng.uniform(0, np.pi, n)
     centre = rng.uniform(10, 50, (n, 2))
-    rects = [shapely.affinity.rotate(box(c[0] - l / 2, c[1] - w / 2, c[0] + l / 2,
+    rects = [shapely.affinity.rotate(box(c[0] - ln / 2, c[1] - w / 2, c[0] + ln / 2,
                                          c[1] + w / 2), t, origin=tuple(c), use_radians=True)
-             for c, l, w, t in zip(centre, length, width, theta)]
+             for c, ln, w, t in zip(centre, length, width, theta)]
     hyp = hypotheses(rects, width_index=width_index, theta_rad=theta)
     bands = np.stack([gaussian_filter(rng.random((60, 60)), 3) for _ in range(2)])
     bands = (bands - bands.min()) / (bands.max() - bands.min())

@@ -56,7 +56,7 @@ def test_workers_start_with_this_installation_when_sys_executable_is_another(mon
     foreign.write_text("#!/bin/sh\necho 3.11 /opt/other-python\n")
     foreign.chmod(0o755)
     monkeypatch.setattr(sys, "executable", str(foreign))
-    version = "%d.%d" % sys.version_info[:2]
+    version = "{}.{}".format(*sys.version_info[:2])
     assert worker_python() == os.path.join(sys.base_prefix, "bin", f"python{version}")
     seen = []
     assert run_tasks(_square, [1, 2, 3], workers=2, progress=lambda f, m: seen.append(m)) \
@@ -101,7 +101,8 @@ def test_cli_on_a_real_scheduler_and_worker_on_loopback(tiled_cloud, tiled_netwo
                                                          dask_loopback):
     out = tmp_path / "roads.gpkg"
     done = subprocess.run([*GISROADS, "lidar", str(tiled_cloud), "-o", str(out), "--json",
-                           "--cue", "intensity", "--scheduler", dask_loopback, "--work-dir", str(tmp_path / "work")],
+                           "--cue", "intensity", "--scheduler", dask_loopback,
+                           "--work-dir", str(tmp_path / "work")],
                           capture_output=True, text=True, env=ENV, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     result = json.loads(done.stdout)

@@ -4,7 +4,7 @@ import pytest
 from pyproj import CRS
 
 from gisroads.evaluate import buffer_metrics
-from gisroads.io.las import LasPointWriter, read_las
+from gisroads.io.las import LasPointWriter
 from gisroads.lidar.pipeline import auto_cell_m, extract_roads
 from gisroads.synthetic import make_scene, write_cloud
 

@@ -5,7 +5,6 @@ from pathlib import Path
 from xml.etree import ElementTree
 
 import geopandas as gpd
-import numpy as np
 import pytest
 import shapely
 

@@ -6,8 +6,8 @@ import shapely
 
 from gisroads.evaluate import area_metrics
 from gisroads.io.las import read_las
-from gisroads.snakes.pipeline import (Ribbon, extract_map_guided, fit_ribbon, mosaic,
-                                      ribbon_levels, tag_cloud)
+from gisroads.snakes.pipeline import (Ribbon, extract_map_guided, mosaic,
+                                      ribbon_levels)
 from gisroads.synthetic import make_scene, write_cloud
 from gisroads.synthetic.perturb import perturb_lines
 
