@@ -17,7 +17,7 @@ def classFactory(iface):  # noqa: N802 (QGIS's name)
     from .plugin import GisroadsPlugin, UnavailablePlugin
     missing = missing_requirements()
     if missing:
-        from .external import find_executable
+        from .runner import find_executable
         from .plugin import ExternalPlugin
         # external-tool mode; without a gisroads command, Set up gisroads makes one
         return ExternalPlugin(iface, missing_message(missing), find_executable())

@@ -9,8 +9,7 @@ import pandas as pd
 import shapely
 from pyproj import CRS
 from qgis.core import (QgsCoordinateReferenceSystem, QgsFeature, QgsFeatureSink, QgsField,
-                       QgsFields, QgsGeometry, QgsProcessingException,
-                       QgsVectorLayer, QgsWkbTypes)
+                       QgsFields, QgsGeometry, QgsProcessingException, QgsWkbTypes)
 from qgis.PyQt.QtCore import QVariant
 
 from gisroads.errors import INPUT_ERRORS, reported_warnings
@@ -139,20 +138,3 @@ def style_on_load(context, dest_id: str, layer_name: str) -> None:
     qml = STYLES_DIR / f"{layer_name}.qml"
     if qml.exists():
         on_load(context, dest_id, ApplyStyle(str(qml)))
-
-
-def open_geopackage_layers(path: str) -> list[tuple[str, QgsVectorLayer, bool]]:
-    """Each layer of a GeoPackage as the QGIS desktop opens it: with the default style
-    stored in the file. Returns ``(name, layer, styled_from_file)`` per layer."""
-    from gisroads.io.vector import list_layers
-    opened = []
-    for name in list_layers(path):
-        options = QgsVectorLayer.LayerOptions()
-        options.loadDefaultStyle = False  # loaded explicitly below, to know if it worked
-        layer = QgsVectorLayer(f"{path}|layername={name}", name, "ogr", options)
-        if not layer.isValid():
-            raise QgsProcessingException(f"{path}: layer {name} cannot be opened")
-        _, styled = layer.loadDefaultStyle()
-        opened.append((name, layer, bool(styled)))
-    return opened
-

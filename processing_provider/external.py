@@ -9,91 +9,37 @@ the private environment that *Set up gisroads* makes in the QGIS profile
 (``--progress-json``) and its result as JSON on stdout (``--json``); a cancel terminates it
 (SIGTERM: it removes what it was writing).
 
-Standard library and qgis only: this module must import where gisroads cannot. So far the
-whole pipelines run this way (LiDAR, imagery, map-guided snakes) and the network stage
-(:data:`EXTERNAL_ALGORITHMS`, their layers loaded as in-process: :mod:`.loading`); the
-other algorithms need the packages in QGIS.
+Standard library and qgis only: this module must import where gisroads cannot. The whole
+pipelines (LiDAR, imagery, map-guided snakes), the network stage and a few tools have an
+external twin here (:data:`EXTERNAL_ALGORITHMS`, their layers loaded as in-process:
+:mod:`.loading`); the stages that are one job of :mod:`gisroads.jobs` are one class for
+both modes (:data:`JOB_ALGORITHMS`); the other algorithms need the packages in QGIS.
 """
 from __future__ import annotations
 
-import json
-import os
-import shutil
-import subprocess
 from pathlib import Path
 
-from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException,
-                       QgsProcessingOutputNumber, QgsProcessingParameterEnum,
-                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
-                       QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
-                       QgsProcessingParameterRasterLayer, QgsProcessingProvider, QgsSettings)
+from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutputNumber,
+                       QgsProcessingParameterEnum, QgsProcessingParameterFeatureSource,
+                       QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
+                       QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer,
+                       QgsProcessingProvider)
 
 from .algorithms.base import (add_scene_parameters, background_output, city_blocks_parameters,
                               train_parameters, workers_parameter)
-from .environment import ready_executable
+from .algorithms.lidar_evidence import LidarRoadEvidence
+from .algorithms.lidar_ground_intensity import LidarGroundIntensity
+from .algorithms.lidar_likelihood import LidarLikelihood
+from .algorithms.lidar_min_cover import LidarMinCover
+from .algorithms.lidar_rectangles_network import RectanglesToNetwork
+from .algorithms.lidar_segmentation import LidarSegmentation
+from .algorithms.open_network import OpenRoadNetwork
+from .algorithms.register_map import RegisterRoadMap
+from .algorithms.tag_points import TagRoadPoints
 from .loading import (load_beneath_on_completion, load_geopackage_on_completion,
                       load_scene_on_completion)
-from .setup_gisroads import SetUpGisroads, private_environment_folder
-
-SETTING = "gisroads/executable"
-
-
-def find_executable() -> str | None:
-    """The external ``gisroads`` (see the module's doc for the order), None when none runs."""
-    candidates = [os.environ.get("GISROADS_EXECUTABLE"), QgsSettings().value(SETTING, ""),
-                  ready_executable(private_environment_folder()), shutil.which("gisroads")]
-    for candidate in filter(None, candidates):
-        try:
-            done = subprocess.run([candidate, "--version"], capture_output=True, text=True,
-                                  timeout=60)
-        except (OSError, subprocess.SubprocessError):
-            continue
-        if done.returncode == 0 and done.stdout.startswith("gisroads"):
-            return candidate
-    return None
-
-
-def run_external(executable: str, arguments: list[str], feedback) -> dict:
-    """Run ``gisroads ARGUMENTS --json --progress-json``: progress and messages to
-    ``feedback``, a cancel terminates it; returns its JSON result or raises
-    QgsProcessingException with its one-line error."""
-    command = [executable, *arguments, "--json", "--progress-json"]
-    feedback.pushCommandInfo(" ".join(command))
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                               text=True)
-    stop = process.terminate  # one bound method, to disconnect what was connected
-    feedback.canceled.connect(stop)
-    messages = []
-    try:
-        for line in process.stderr:
-            if line.startswith("{"):
-                if feedback.isCanceled():
-                    continue  # lines the command wrote before it was stopped
-                event = json.loads(line)
-                feedback.setProgress(100.0 * event["progress"])
-                if event["message"]:
-                    feedback.setProgressText(event["message"])
-            elif line.strip():
-                messages.append(line.strip())
-                if line.startswith("gisroads: warning: "):
-                    feedback.pushWarning(line.strip()[len("gisroads: warning: "):])
-        stdout = process.stdout.read()
-        status = process.wait()
-    finally:
-        feedback.canceled.disconnect(stop)
-        if process.poll() is None:
-            process.kill()
-            process.wait()
-        process.stdout.close()
-        process.stderr.close()
-    if feedback.isCanceled() or status == 130:
-        raise QgsProcessingException("cancelled")
-    if status != 0:
-        errors = [m for m in messages if m.startswith("gisroads: error: ")]
-        raise QgsProcessingException(
-            errors[-1][len("gisroads: error: "):] if errors
-            else f"{executable} failed (exit status {status}): {' '.join(messages[-3:])}")
-    return json.loads(stdout)
+from .runner import external_defaults, run_external
+from .setup_gisroads import SetUpGisroads
 
 
 class _ExternalAlgorithm(QgsProcessingAlgorithm):
@@ -460,6 +406,11 @@ class ExternalProvider(QgsProcessingProvider):
         if self.executable is not None:
             for algorithm in EXTERNAL_ALGORITHMS:
                 self.addAlgorithm(algorithm(self.executable))
+            self.addAlgorithm(OpenRoadNetwork())  # QGIS alone: nothing to run
+            # the stages need a gisroads that reports its jobs' defaults
+            if external_defaults(self.executable) is not None:
+                for algorithm in JOB_ALGORITHMS:
+                    self.addAlgorithm(algorithm(self.executable))
 
     def use(self, executable: str):
         """Run the algorithms through ``executable`` from now on."""
@@ -473,3 +424,8 @@ EXTERNAL_ALGORITHMS = (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork,
                        ExternalRoadRasterToNetwork, ExternalRibbonSnakeRoads,
                        ExternalSyntheticScene, ExternalTrainRoadModel, ExternalCityBlocks)
 """The algorithms that run through the external ``gisroads``: same ids as in-process."""
+
+JOB_ALGORITHMS = (LidarGroundIntensity, LidarSegmentation, LidarLikelihood, LidarMinCover,
+                  RectanglesToNetwork, LidarRoadEvidence, TagRoadPoints, RegisterRoadMap)
+"""The algorithms whose one class runs in both modes (:class:`.algorithms.base.JobAlgorithm`):
+given the executable, through ``gisroads job``."""

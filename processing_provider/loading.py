@@ -7,10 +7,11 @@ loads layers without their stored default style, so a post-processor loads it.
 """
 from __future__ import annotations
 
+import sqlite3
 from pathlib import Path
 
-from qgis.core import (QgsProcessingContext, QgsProcessingLayerPostProcessorInterface,
-                       QgsVectorLayer)
+from qgis.core import (QgsProcessingContext, QgsProcessingException,
+                       QgsProcessingLayerPostProcessorInterface, QgsVectorLayer)
 
 #: The road network's own layers (gisroads.geo's CENTRELINES, POLYGONS, JUNCTIONS and
 #: SERVICE_CENTRELINES): ticked when a run loads them; the others it loads beside them
@@ -162,3 +163,35 @@ def load_scene_on_completion(context, paths: dict, folder: str) -> dict:
                 outputs[key], QgsProcessingContext.LayerDetails(key.lower(), context.project(),
                                                                 key))
     return outputs
+
+
+def geopackage_layer_names(path) -> list[str]:
+    """The vector layers of a GeoPackage, in the order they were written (its
+    ``gpkg_contents`` table, read with the standard library's sqlite3)."""
+    if not Path(path).is_file():
+        raise QgsProcessingException(f"{path}: no such file")
+    try:
+        connection = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+        try:
+            rows = connection.execute("SELECT table_name FROM gpkg_contents WHERE data_type "
+                                      "= 'features' ORDER BY rowid").fetchall()
+        finally:
+            connection.close()
+    except sqlite3.DatabaseError:
+        raise QgsProcessingException(f"{path}: not a GeoPackage") from None
+    return [name for (name,) in rows]
+
+
+def open_geopackage_layers(path: str) -> list[tuple[str, QgsVectorLayer, bool]]:
+    """Each layer of a GeoPackage as the QGIS desktop opens it: with the default style
+    stored in the file. Returns ``(name, layer, styled_from_file)`` per layer."""
+    opened = []
+    for name in geopackage_layer_names(path):
+        options = QgsVectorLayer.LayerOptions()
+        options.loadDefaultStyle = False  # loaded explicitly below, to know if it worked
+        layer = QgsVectorLayer(f"{path}|layername={name}", name, "ogr", options)
+        if not layer.isValid():
+            raise QgsProcessingException(f"{path}: layer {name} cannot be opened")
+        _, styled = layer.loadDefaultStyle()
+        opened.append((name, layer, bool(styled)))
+    return opened

@@ -12,14 +12,14 @@ from pathlib import Path
 from .. import __version__
 from ..errors import INPUT_ERRORS, GisroadsError, reported_warnings
 from ..progress import Cancelled
-from . import (blocks, demo, evaluate, image, info, lidar, snakes, synth, train, update,
+from . import (blocks, demo, evaluate, image, info, job, lidar, snakes, synth, train, update,
                vectorize)
 from .options import EPILOG
 from .report import ProgressBar
 
 #: The subcommand modules, in the order ``gisroads --help`` lists them.
 SUBCOMMANDS = (info, synth, evaluate, lidar, blocks, image, train, vectorize, snakes, demo,
-               update)
+               update, job)
 
 
 def build_parser() -> argparse.ArgumentParser:

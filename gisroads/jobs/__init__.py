@@ -6,6 +6,9 @@ One module per method (:mod:`.lidar`, :mod:`.imagery`, :mod:`.snakes`, :mod:`.ne
 inputs they read, :func:`network_summary`, the no-road warning). Every job is importable
 from here.
 """
+import inspect
+
+from ..errors import GisroadsError
 from .common import (VECTOR_SUFFIXES, describe_file, network_summary, parse_metres,
                      read_image, stage_default)
 from .demo import DEMO_CLOUD, DEMO_IMAGE, DEMO_IMAGE_TRUTH, demo_job
@@ -18,11 +21,45 @@ from .network import vectorize_job
 from .snakes import attractor_job, register_job, snakes_job
 from .update import update_job
 
+JOBS = {function.__name__: function for function in (
+    evaluate_job, synth_job, image_job, train_job, blocks_job, evidence_job,
+    ground_intensity_job, lidar_job, lidar_segmentation_job, likelihood_job, min_cover_job,
+    rectangles_network_job, tag_job, vectorize_job, attractor_job, register_job, snakes_job,
+    update_job, train_lidar_job)}
+"""The jobs by name, for ``gisroads job NAME`` (the QGIS algorithms' external-tool mode)."""
+
+
+def job_defaults(name: str) -> dict:
+    """``{keyword: default}`` of the job ``name`` (those with a default, ``progress``
+    excepted), as JSON takes them: tuples as lists."""
+    defaults = {}
+    for parameter in inspect.signature(JOBS[name]).parameters.values():
+        if parameter.default is not inspect.Parameter.empty and parameter.name != "progress":
+            value = parameter.default
+            defaults[parameter.name] = list(value) if isinstance(value, tuple) else value
+    return defaults
+
+
+def run_job(name: str, arguments: dict, progress=None) -> dict:
+    """The job ``name`` called with ``arguments`` (keywords), and ``progress`` when it
+    reports progress."""
+    if name not in JOBS:
+        raise GisroadsError(f"no job {name!r}; the jobs: {', '.join(sorted(JOBS))}")
+    function = JOBS[name]
+    unknown = set(arguments) - set(inspect.signature(function).parameters)
+    if unknown:
+        raise GisroadsError(f"{name} takes no {', '.join(sorted(unknown))}")
+    if "progress" in inspect.signature(function).parameters:
+        arguments = {**arguments, "progress": progress}
+    return function(**arguments)
+
+
 __all__ = [
     "VECTOR_SUFFIXES", "describe_file", "network_summary", "parse_metres", "read_image",
     "stage_default", "DEMO_CLOUD", "DEMO_IMAGE", "DEMO_IMAGE_TRUTH", "demo_job",
     "evaluate_job", "synth_job", "image_job", "train_job", "blocks_job", "evidence_job",
     "ground_intensity_job", "lidar_job", "lidar_segmentation_job", "likelihood_job",
     "min_cover_job", "rectangles_network_job", "tag_job", "vectorize_job", "attractor_job",
-    "register_job", "snakes_job", "update_job", "train_lidar_job",
+    "register_job", "snakes_job", "update_job", "train_lidar_job", "JOBS", "job_defaults",
+    "run_job",
 ]

@@ -129,23 +129,36 @@ def _network_quicklook(path, network, first: tuple, *, background, title: str) -
     return Path(path)
 
 
+def _named_layer(source) -> tuple[str, str | None]:
+    """``"roads.gpkg|layername=streets"`` (QGIS's and OGR's way of naming a layer of a
+    file) as ``("roads.gpkg", "streets")``; a plain path as ``(path, None)``."""
+    path, _, layer = str(source).partition("|layername=")
+    return path, layer or None
+
+
 def _layer(source, layer: str) -> gpd.GeoDataFrame:
-    """A GeoDataFrame as given, or layer ``layer`` of a file (its only layer otherwise)."""
+    """A GeoDataFrame as given, or a file's layer: the one its source names
+    (``path|layername=...``), else ``layer`` when it has one, else its only layer."""
     if isinstance(source, gpd.GeoDataFrame):
         return source
-    return read_layer(source, layer if layer in list_layers(source) else None)
+    path, named = _named_layer(source)
+    if named is None and layer in list_layers(path):
+        named = layer
+    return read_layer(path, named)
 
 
 def _map_lines(map_source) -> gpd.GeoDataFrame:
-    """Road map lines from a GeoDataFrame or a line file (a GeoPackage's road_centrelines
-    layer when it has one, else its first layer)."""
+    """Road map lines from a GeoDataFrame or a line file: the layer its source names
+    (``path|layername=...``), a GeoPackage's road_centrelines layer when it has one, else
+    its first layer."""
     if isinstance(map_source, gpd.GeoDataFrame):
         return map_source
-    if not Path(map_source).is_file():
-        raise MissingFileError(f"{map_source}: no such road map file")
-    gpkg = str(map_source).lower().endswith(".gpkg")
-    return read_layer(map_source, CENTRELINES if gpkg and CENTRELINES in
-                      list_layers(map_source) else None)
+    path, named = _named_layer(map_source)
+    if not Path(path).is_file():
+        raise MissingFileError(f"{path}: no such road map file")
+    if named is None and path.lower().endswith(".gpkg") and CENTRELINES in list_layers(path):
+        named = CENTRELINES
+    return read_layer(path, named)
 
 
 def read_image(path, *, pixel_m: float | None = None, crs=None) -> tuple[GeoRaster, object]:

@@ -35,7 +35,7 @@ from ..tiling.tilestore import inputs_crs, las_inputs
 from ..progress import Progress, report, scaled
 from ..resources import styles_dir
 from .common import (_layer, _map_lines, _warn_if_empty, _warn_if_no_road, network_summary,
-                     stage_default)
+                     parse_metres, stage_default)
 
 
 def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "cue"),
@@ -329,17 +329,21 @@ def likelihood_job(intensity_path, segments_path, likelihood_path, hypotheses_pa
     """Stage 4: rectangle hypotheses of one level and their per-width likelihood maps.
 
     The edges are recomputed from the intensity (the same deterministic local energy as
-    stage 3). ``widths_m``, ``lengths_m``, ``t_bd`` and ``t_int`` as in
+    stage 3). ``widths_m``, ``lengths_m`` (metres, or their text: "6,9,12"), ``t_bd`` and
+    ``t_int`` as in
     :func:`gisroads.lidar.hypotheses.road_hypotheses`, ``l_max`` as in its maps.
     Writes ``likelihood_path`` (one band per width) and ``hypotheses_path`` (GeoPackage,
     layer ``hypotheses``); no valid hypothesis gives zero maps, an empty layer and a
     :class:`~gisroads.errors.NoRoadFoundWarning`.
     """
+    widths_m = (parse_metres(widths_m, "widths") if isinstance(widths_m, str)
+                else tuple(widths_m))
+    if isinstance(lengths_m, str):
+        lengths_m = parse_metres(lengths_m, "lengths")
     image = _level_image(intensity_path, level)
     segments = read_raster(segments_path)
     if segments.data.shape[1:] != image.data.shape or segments.transform != image.transform:
         raise GisroadsError(f"{segments_path} is not on the grid of {intensity_path}")
-    widths_m = tuple(widths_m)
     report(progress, 0.05, "edges")
     magnitude, orientation = local_energy(image.data)
     report(progress, 0.2, "hypotheses")

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import geopandas as gpd
 import shapely
 
 from ..errors import GisroadsError
 from ..io.las import cloud_crs
 from ..io.raster import write_geotiff
-from ..io.vector import read_layer, write_geopackage
+from ..io.vector import write_geopackage
 from ..progress import Progress, report, scaled
 from ..snakes.pipeline import CLEARANCE_M, curb_attractor, extract_map_guided
 from ..snakes.registration import SNAP_M, SUPPORT_RADIUS_M, register_map
@@ -43,8 +42,9 @@ def snakes_job(cloud_path, map_source, out_path, *,
                scheduler: str | None = None, work_dir=None, progress: Progress = None) -> dict:
     """Map-guided road extraction with ribbon snakes (Boyko & Funkhouser, 2011).
 
-    ``map_source``: a line file (a GeoPackage's road_centrelines layer, else its first;
-    GeoJSON, any OGR format) or a GeoDataFrame, in any CRS: reprojected to the cloud's.
+    ``map_source``: a line file (the layer its source names, ``path|layername=...``, else
+    a GeoPackage's road_centrelines layer, else its first; GeoJSON, any OGR format) or a
+    GeoDataFrame, in any CRS: reprojected to the cloud's.
     Writes ``out_path`` (road_centrelines, road_polygons, junctions and the QA layers
     ribbon_patches and registered_map) in the cloud's CRS; optionally ``tagged_las`` (the
     cloud with road points in class 11) and ``attractor_tif`` (the patches' attractor
@@ -78,14 +78,15 @@ def register_job(cloud_path, map_source, out_path, *,
                  snap_m: float = SNAP_M, progress: Progress = None) -> dict:
     """Register a 2D road map onto a LAS/LAZ cloud (Boyko & Funkhouser, section 2.1).
 
-    ``map_source``: a line file (a GeoPackage's road_centrelines layer, else its first;
-    GeoJSON, any OGR format) or a GeoDataFrame, in any CRS: reprojected to the cloud's.
+    ``map_source``: a line file (the layer its source names, ``path|layername=...``, else
+    a GeoPackage's road_centrelines layer, else its first; GeoJSON, any OGR format) or a
+    GeoDataFrame, in any CRS: reprojected to the cloud's.
     Only the points near the map's lines are read, chunk by chunk. Writes the
     ``registered_map`` layer (LineString Z, elevations in metres) to ``out_path`` in the
     cloud's CRS. The parameters as in :func:`gisroads.snakes.registration.register_map`.
     """
     working, source_crs = cloud_crs(cloud_path)
-    lines = map_source if isinstance(map_source, gpd.GeoDataFrame) else read_layer(map_source)
+    lines = _map_lines(map_source)
     lines = lines[lines.geometry.notna() & ~lines.geometry.is_empty]
     if len(lines) == 0:
         raise GisroadsError(f"{map_source}: the map holds no line")

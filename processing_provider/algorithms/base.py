@@ -1,5 +1,6 @@
 """What every gisroads algorithm shares: group, translation hook, instance creation, help,
 stage numbers in the toolbox and the decimals of number parameters."""
+import json
 import math
 import re
 
@@ -80,6 +81,55 @@ class GisroadsAlgorithm(QgsProcessingAlgorithm):
                           f"{result['junctions']} junctions{detail}")
         return {"ROADS": result["roads"], "LENGTH_M": result["length_m"],
                 "JUNCTIONS": result["junctions"]}
+
+
+class JobAlgorithm(GisroadsAlgorithm):
+    """An algorithm whose work is one job of :mod:`gisroads.jobs` (``JOB``), called with
+    plain values: paths, numbers, strings. The same class runs in two modes: in-process
+    (QGIS's Python has gisroads' packages) it calls the job; given the external
+    ``gisroads`` command (``executable``, external-tool mode) it runs ``gisroads job JOB
+    ARGUMENTS``. The defaults of its parameters are the job's, read from gisroads in
+    either mode (``gisroads job --defaults`` in the external one), so they are written
+    once. The module of such an algorithm imports nothing of gisroads at its top."""
+
+    JOB = ""
+
+    def __init__(self, executable: str | None = None):
+        super().__init__()
+        self.executable = executable
+
+    def createInstance(self):  # noqa: N802
+        return type(self)(self.executable)
+
+    def default(self, parameter: str):
+        """The job's default of its keyword argument ``parameter``."""
+        if self.executable is None:
+            from gisroads.jobs import job_defaults
+            return job_defaults(self.JOB)[parameter]
+        from ..runner import external_defaults
+        return (external_defaults(self.executable) or {})[self.JOB][parameter]
+
+    def source_path(self, parameters, name: str, context, feedback) -> str:
+        """A vector input as the job reads it: the layer's own file when the job can read
+        it (``path|layername=...`` for a GeoPackage layer), else a temporary GeoPackage of
+        what QGIS holds (a selection, a PostGIS table, a memory layer)."""
+        path, layer = self.parameterAsCompatibleSourceLayerPathAndLayerName(
+            parameters, name, context, ["gpkg"], "gpkg", feedback)
+        return f"{path}|layername={layer}" if layer else path
+
+    def run_job(self, arguments: dict, feedback) -> dict:
+        """The job's result, as JSON gives it (paths as strings) in both modes."""
+        if self.executable is not None:
+            from ..runner import run_external
+            return run_external(self.executable, ["job", self.JOB, json.dumps(arguments)],
+                                feedback)
+        from gisroads.jobs import run_job
+        from gisroads.progress import to_json
+
+        from ..convert import gisroads_errors, progress_callback
+        with gisroads_errors(feedback):
+            result = run_job(self.JOB, arguments, progress_callback(feedback))
+        return json.loads(to_json(result))
 
 
 def _decimals(value: float) -> int:

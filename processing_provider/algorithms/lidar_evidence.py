@@ -3,16 +3,14 @@ paper)."""
 from qgis.core import (QgsProcessingOutputNumber, QgsProcessingOutputString,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination)
 
-from gisroads.jobs import evidence_job, stage_default
-
-from ..convert import gisroads_errors, progress_callback
-from .base import GisroadsAlgorithm, cloud_input
+from .base import JobAlgorithm, cloud_input
 
 
-class LidarRoadEvidence(GisroadsAlgorithm):
+class LidarRoadEvidence(JobAlgorithm):
     NAME = "lidarroadevidence"
     DISPLAY_NAME = "Road evidence raster (LiDAR)"
     GROUP = "LiDAR"
+    JOB = "evidence_job"
     HELP = (
         "<p>Measures, per cell of the lowest surface of an airborne LiDAR point cloud, how "
         "road-like it is by everything the cloud carries, and combines the cues into one "
@@ -37,10 +35,10 @@ class LidarRoadEvidence(GisroadsAlgorithm):
                                           optional=True, minValue=0.1, maxValue=5.0),
              "empty: 0.5 m, or the mean point spacing of a sparser cloud"),
             (QgsProcessingParameterNumber("TILE", self.tr("Tile side (metres)"), double,
-                                          stage_default(evidence_job, "tile_m"), minValue=50.0),
+                                          self.default("tile_m"), minValue=50.0),
              "the cloud is read and measured tile by tile, normalised alike"),
             (QgsProcessingParameterNumber("OVERLAP", self.tr("Tile overlap (metres)"), double,
-                                          stage_default(evidence_job, "overlap_m"),
+                                          self.default("overlap_m"),
                                           minValue=0.0),
              "overlap with each neighbouring tile; each cell comes from one tile's core"),
             (QgsProcessingParameterRasterDestination("OUTPUT", self.tr("Road evidence")),
@@ -52,14 +50,12 @@ class LidarRoadEvidence(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
-        with gisroads_errors(feedback):
-            result = evidence_job(
-                self.parameterAsFile(parameters, "INPUT", context), out,
-                cell_m=(self.parameterAsDouble(parameters, "CELL", context)
-                        if parameters.get("CELL") not in (None, "") else None),
-                tile_m=self.parameterAsDouble(parameters, "TILE", context),
-                overlap_m=self.parameterAsDouble(parameters, "OVERLAP", context),
-                progress=progress_callback(feedback))
+        result = self.run_job(dict(
+            cloud_path=self.parameterAsFile(parameters, "INPUT", context), out_path=out,
+            cell_m=(self.parameterAsDouble(parameters, "CELL", context)
+                    if parameters.get("CELL") not in (None, "") else None),
+            tile_m=self.parameterAsDouble(parameters, "TILE", context),
+            overlap_m=self.parameterAsDouble(parameters, "OVERLAP", context)), feedback)
         feedback.pushInfo(f"cues used: {result['cues']}; missing: {result['missing'] or '-'}")
         return {"OUTPUT": out, "CUES": result["cues"], "MISSING": result["missing"],
                 "CELL_M": result["cell_m"]}

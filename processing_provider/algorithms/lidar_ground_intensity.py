@@ -2,17 +2,15 @@
 from qgis.core import (QgsProcessingOutputNumber, QgsProcessingOutputRasterLayer,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination)
 
-from gisroads.jobs import ground_intensity_job, stage_default
-
-from ..convert import gisroads_errors, progress_callback
-from .base import GisroadsAlgorithm, cloud_input
+from .base import JobAlgorithm, cloud_input
 
 
-class LidarGroundIntensity(GisroadsAlgorithm):
+class LidarGroundIntensity(JobAlgorithm):
     NAME = "lidargroundintensity"
     DISPLAY_NAME = "Ground planes and intensity image"
     GROUP = "LiDAR"
     STAGE = 1
+    JOB = "ground_intensity_job"
     HELP = (
         "<p>Finds the ground of an airborne LiDAR point cloud on one or more levels and "
         "projects the intensity of each level's ground points to an image (Zhu &amp; "
@@ -35,12 +33,12 @@ class LidarGroundIntensity(GisroadsAlgorithm):
                                           None, optional=True, minValue=0.1, maxValue=5.0),
              "empty: 0.5 m as in the paper, or the mean point spacing of a sparser cloud"),
             (QgsProcessingParameterNumber("T_PLANAR", self.tr("Planarity threshold T_planar"),
-                                          double, stage_default(ground_intensity_job, "t_planar"),
+                                          double, self.default("t_planar"),
                                           minValue=0.0001, maxValue=0.3),
              "a cluster is planar when its smallest eigenvalue over the eigenvalue sum is "
              "below this (paper: 0.01)"),
             (QgsProcessingParameterNumber("T_VERT", self.tr("Horizontality threshold T_vert"),
-                                          double, stage_default(ground_intensity_job, "t_vert"),
+                                          double, self.default("t_vert"),
                                           minValue=0.5, maxValue=1.0),
              "a planar cluster is horizontal when |n . z| exceeds this (paper: 0.98)"),
             (QgsProcessingParameterRasterDestination("OUTPUT", self.tr("Intensity image")),
@@ -57,14 +55,13 @@ class LidarGroundIntensity(GisroadsAlgorithm):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
         heights = self.parameterAsOutputLayer(parameters, "HEIGHTS", context)
-        with gisroads_errors():
-            result = ground_intensity_job(
-                self.parameterAsFile(parameters, "INPUT", context), out, heights_path=heights,
-                cell_m=(self.parameterAsDouble(parameters, "CELL", context)
-                        if parameters.get("CELL") not in (None, "") else None),
-                t_planar=self.parameterAsDouble(parameters, "T_PLANAR", context),
-                t_vert=self.parameterAsDouble(parameters, "T_VERT", context),
-                progress=progress_callback(feedback))
+        result = self.run_job(dict(
+            cloud_path=self.parameterAsFile(parameters, "INPUT", context), intensity_path=out,
+            heights_path=heights,
+            cell_m=(self.parameterAsDouble(parameters, "CELL", context)
+                    if parameters.get("CELL") not in (None, "") else None),
+            t_planar=self.parameterAsDouble(parameters, "T_PLANAR", context),
+            t_vert=self.parameterAsDouble(parameters, "T_VERT", context)), feedback)
         feedback.pushInfo(f"{result['levels']} ground level(s) from {result['ground_points']} "
                           f"of {result['points']} points, {result['cell_m']:g} m cells")
         return {"OUTPUT": out, "HEIGHTS": heights, "LEVEL_INDEX": str(result["level_index"]),

@@ -3,21 +3,17 @@ from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFileDest
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
                        QgsProcessingParameterRasterLayer, QgsProcessingParameterString)
 
-from gisroads.jobs import likelihood_job, parse_metres
-from gisroads.lidar.hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, T_BD,
-                                       T_INT)
-
-from ..convert import gisroads_errors, progress_callback
 from ..loading import load_geopackage_on_completion
-from .base import GisroadsAlgorithm
+from .base import JobAlgorithm
 from .lidar_segmentation import level_parameter
 
 
-class LidarLikelihood(GisroadsAlgorithm):
+class LidarLikelihood(JobAlgorithm):
     NAME = "lidarlikelihood"
     DISPLAY_NAME = "Road likelihood maps"
     GROUP = "LiDAR"
     STAGE = 3
+    JOB = "likelihood_job"
     HELP = (
         "<p>Rectangular road hypotheses on one level of a LiDAR intensity image and the road "
         "likelihood map of every window width (Zhu &amp; Mordohai, section 4.3, Eq. 5). "
@@ -40,19 +36,20 @@ class LidarLikelihood(GisroadsAlgorithm):
             (QgsProcessingParameterRasterLayer("SEGMENTS", self.tr("Segments")),
              "the segments GeoTIFF of Edges and NCut segmentation, for the same level"),
             (QgsProcessingParameterString("WIDTHS", self.tr("Road widths to try (metres)"),
-                                          ",".join(f"{w:g}" for w in DEFAULT_WIDTHS_M)),
+                                          ",".join(f"{w:g}" for w in self.default("widths_m"))),
              "comma-separated; one likelihood band per width (paper: 10-25 m for arterials)"),
             (QgsProcessingParameterString("LENGTHS", self.tr("Window lengths (metres)"),
-                                          ",".join(f"{v:g}" for v in DEFAULT_LENGTHS_M)),
+                                          ",".join(f"{v:g}" for v in self.default("lengths_m"))),
              "comma-separated (paper: 40-300 m)"),
             (QgsProcessingParameterNumber("T_BD", self.tr("Boundary threshold T_bd"), double,
-                                          T_BD, minValue=0.0, maxValue=1.0),
+                                          self.default("t_bd"), minValue=0.0, maxValue=1.0),
              "least boundary-filter score of a valid window"),
             (QgsProcessingParameterNumber("T_INT", self.tr("Interior threshold T_int"),
-                                          double, T_INT, minValue=-1.0, maxValue=1.0),
+                                          double, self.default("t_int"), minValue=-1.0,
+                                          maxValue=1.0),
              "least interior-filter score of a valid window"),
             (QgsProcessingParameterNumber("L_MAX", self.tr("Likelihood cap L_max"), double,
-                                          L_MAX, minValue=0.1),
+                                          self.default("l_max"), minValue=0.1),
              "likelihood above which a pixel is surely road"),
             (QgsProcessingParameterRasterDestination("OUTPUT", self.tr("Likelihood maps")),
              "GeoTIFF, one band per width"),
@@ -66,19 +63,16 @@ class LidarLikelihood(GisroadsAlgorithm):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
         hypotheses = self.parameterAsFileOutput(parameters, "HYPOTHESES", context)
-        with gisroads_errors(feedback):
-            result = likelihood_job(
-                self.parameterAsRasterLayer(parameters, "INPUT", context).source(),
-                self.parameterAsRasterLayer(parameters, "SEGMENTS", context).source(),
-                out, hypotheses, level=self.parameterAsInt(parameters, "LEVEL", context),
-                widths_m=parse_metres(self.parameterAsString(parameters, "WIDTHS", context),
-                                      "widths"),
-                lengths_m=parse_metres(self.parameterAsString(parameters, "LENGTHS", context),
-                                       "lengths"),
-                t_bd=self.parameterAsDouble(parameters, "T_BD", context),
-                t_int=self.parameterAsDouble(parameters, "T_INT", context),
-                l_max=self.parameterAsDouble(parameters, "L_MAX", context),
-                progress=progress_callback(feedback))
+        result = self.run_job(dict(
+            intensity_path=self.parameterAsRasterLayer(parameters, "INPUT", context).source(),
+            segments_path=self.parameterAsRasterLayer(parameters, "SEGMENTS", context).source(),
+            likelihood_path=out, hypotheses_path=hypotheses,
+            level=self.parameterAsInt(parameters, "LEVEL", context),
+            widths_m=self.parameterAsString(parameters, "WIDTHS", context),
+            lengths_m=self.parameterAsString(parameters, "LENGTHS", context),
+            t_bd=self.parameterAsDouble(parameters, "T_BD", context),
+            t_int=self.parameterAsDouble(parameters, "T_INT", context),
+            l_max=self.parameterAsDouble(parameters, "L_MAX", context)), feedback)
         load_geopackage_on_completion(context, hypotheses, ("hypotheses",))
         feedback.pushInfo(f"{result['n_hypotheses']} valid windows")
         return {"OUTPUT": out, "HYPOTHESES": hypotheses,

@@ -4,20 +4,16 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingPa
                        QgsProcessingParameterFileDestination, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterLayer)
 
-from gisroads.jobs import min_cover_job
-from gisroads.lidar.hypotheses import L_MAX
-from gisroads.lidar.mincover import A, D_MAX
-
-from ..convert import gisroads_errors, progress_callback, source_to_frame
 from ..loading import load_geopackage_on_completion
-from .base import GisroadsAlgorithm
+from .base import JobAlgorithm
 
 
-class LidarMinCover(GisroadsAlgorithm):
+class LidarMinCover(JobAlgorithm):
     NAME = "lidarmincover"
     DISPLAY_NAME = "Minimum-cover road rectangles"
     GROUP = "LiDAR"
     STAGE = 4
+    JOB = "min_cover_job"
     HELP = (
         "<p>Selects the fewest, most likely rectangles that explain the road likelihood "
         "(Zhu &amp; Mordohai, section 4.4, Algorithm 2): seeds are sampled along the centre "
@@ -40,14 +36,14 @@ class LidarMinCover(GisroadsAlgorithm):
              "width_index, width_m)"),
             (QgsProcessingParameterRasterLayer("LIKELIHOOD", self.tr("Likelihood maps")),
              "the likelihood GeoTIFF of Road likelihood maps"),
-            (QgsProcessingParameterNumber("A", self.tr("Rectangle cost A"), double, A,
-                                          minValue=0.0),
+            (QgsProcessingParameterNumber("A", self.tr("Rectangle cost A"), double,
+                                          self.default("a"), minValue=0.0),
              "fixed cost of every selected rectangle (Eq. 6)"),
             (QgsProcessingParameterNumber("D_MAX", self.tr("Largest cost density D_max"),
-                                          double, D_MAX, minValue=0.0),
+                                          double, self.default("d_max"), minValue=0.0),
              "the greedy cover stops when the best cost per new seed exceeds this (Eq. 8)"),
             (QgsProcessingParameterNumber("L_MAX", self.tr("Likelihood cap L_max"), double,
-                                          L_MAX, minValue=0.1),
+                                          self.default("l_max"), minValue=0.1),
              "the cap used when the maps were made"),
             (QgsProcessingParameterBoolean("EXACT", self.tr("Exact integer program"), False),
              "solve the cover exactly with PuLP (small inputs: minutes for thousands of "
@@ -67,14 +63,11 @@ class LidarMinCover(GisroadsAlgorithm):
                        l_max=self.parameterAsDouble(parameters, "L_MAX", context))
         if not exact:
             options["d_max"] = self.parameterAsDouble(parameters, "D_MAX", context)
-            options["progress"] = progress_callback(feedback)
-        with gisroads_errors(feedback):
-            hypotheses = source_to_frame(
-                self.parameterAsSource(parameters, "INPUT", context), feedback)
-            result = min_cover_job(
-                hypotheses, self.parameterAsRasterLayer(parameters, "LIKELIHOOD",
+        result = self.run_job(dict(
+            hypotheses_path=self.source_path(parameters, "INPUT", context, feedback),
+            likelihood_path=self.parameterAsRasterLayer(parameters, "LIKELIHOOD",
                                                         context).source(),
-                out, exact=exact, **options)
+            rectangles_path=out, exact=exact, **options), feedback)
         load_geopackage_on_completion(context, out, ("rectangles",))
         feedback.pushInfo(f"{result['n_rectangles']} rectangles, cover cost "
                           f"{result['cover_cost']:.1f}")

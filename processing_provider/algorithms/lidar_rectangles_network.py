@@ -1,19 +1,16 @@
 """LiDAR stage 6: road rectangles to centre lines, road polygons and junctions."""
 from qgis.core import QgsProcessing, QgsProcessingParameterFeatureSource
 
-from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
-from gisroads.jobs import rectangles_network_job
-
-from ..convert import gisroads_errors, source_to_frame
 from ..loading import load_geopackage_on_completion
-from .base import GisroadsAlgorithm, network_output
+from .base import JobAlgorithm, network_output
 
 
-class RectanglesToNetwork(GisroadsAlgorithm):
+class RectanglesToNetwork(JobAlgorithm):
     NAME = "rectanglestonetwork"
     DISPLAY_NAME = "Rectangles to centre lines and polygons"
     GROUP = "LiDAR"
     STAGE = 5
+    JOB = "rectangles_network_job"
     HELP = (
         "<p>Turns road rectangles into a road network: each rectangle's mid-line is its "
         "centre line; centre lines of overlapping or abutting rectangles that continue each "
@@ -40,10 +37,10 @@ class RectanglesToNetwork(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
-        with gisroads_errors(feedback):
-            rectangles = source_to_frame(self.parameterAsSource(parameters, "INPUT", context),
-                                         feedback)
-            result = rectangles_network_job(rectangles, out)
-        load_geopackage_on_completion(context, out, ("rectangles", POLYGONS, CENTRELINES,
-                                                     JUNCTIONS), group="roads")
+        result = self.run_job(dict(
+            rectangles_path=self.source_path(parameters, "INPUT", context, feedback),
+            out_path=out), feedback)
+        load_geopackage_on_completion(context, out, ("rectangles", "road_polygons",
+                                                     "road_centrelines", "junctions"),
+                                      group="roads")
         return {"OUTPUT": out, **self.network_outputs(result, feedback)}

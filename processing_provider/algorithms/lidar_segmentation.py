@@ -3,10 +3,7 @@ from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination,
                        QgsProcessingParameterRasterLayer)
 
-from gisroads.jobs import lidar_segmentation_job, stage_default
-
-from ..convert import gisroads_errors
-from .base import GisroadsAlgorithm
+from .base import JobAlgorithm
 
 
 def level_parameter(tr):
@@ -18,11 +15,12 @@ def level_parameter(tr):
     return param
 
 
-class LidarSegmentation(GisroadsAlgorithm):
+class LidarSegmentation(JobAlgorithm):
     NAME = "lidarsegmentation"
     DISPLAY_NAME = "Edges and NCut segmentation (LiDAR)"
     GROUP = "LiDAR"
     STAGE = 2
+    JOB = "lidar_segmentation_job"
     HELP = (
         "<p>Edge strength and orientation of one level of a LiDAR intensity image by local "
         "energy (Morrone &amp; Owens: quadrature pairs of oriented filters), and its "
@@ -40,7 +38,7 @@ class LidarSegmentation(GisroadsAlgorithm):
              "the intensity GeoTIFF of Ground planes and intensity image"),
             (QgsProcessingParameterNumber("SEGMENTS", self.tr("Number of segments"),
                                           QgsProcessingParameterNumber.Integer,
-                                          stage_default(lidar_segmentation_job, "n_segments"),
+                                          self.default("n_segments"),
                                           minValue=10, maxValue=1000),
              "over-segmentation size (paper: 100-200)"),
             (QgsProcessingParameterRasterDestination("OUTPUT", self.tr("Segments")),
@@ -49,22 +47,16 @@ class LidarSegmentation(GisroadsAlgorithm):
                                                      createByDefault=False),
              "optional GeoTIFF: edge magnitude and orientation (radians, from east)"),
         ]
-        self.addParameter(params[0][0])
-        params[0][0].setHelp(self.tr(params[0][1]))
-        self.addParameter(level_parameter(self.tr))
-        for param, text in params[1:]:
-            param.setHelp(self.tr(text))
-            self.addParameter(param)
+        self.add_parameters([params[0], (level_parameter(self.tr), None), *params[1:]])
         self.addOutput(QgsProcessingOutputNumber("N_SEGMENTS", self.tr("Segments made")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
         edges = self.parameterAsOutputLayer(parameters, "EDGES", context) or None
-        with gisroads_errors():
-            result = lidar_segmentation_job(
-                self.parameterAsRasterLayer(parameters, "INPUT", context).source(), out,
-                level=self.parameterAsInt(parameters, "LEVEL", context),
-                n_segments=self.parameterAsInt(parameters, "SEGMENTS", context),
-                edges_path=edges)
+        result = self.run_job(dict(
+            intensity_path=self.parameterAsRasterLayer(parameters, "INPUT", context).source(),
+            segments_path=out, level=self.parameterAsInt(parameters, "LEVEL", context),
+            n_segments=self.parameterAsInt(parameters, "SEGMENTS", context),
+            edges_path=edges), feedback)
         feedback.pushInfo(f"{result['n_segments']} segments")
         return {"OUTPUT": out, "EDGES": edges, "N_SEGMENTS": result["n_segments"]}

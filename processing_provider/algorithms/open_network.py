@@ -5,7 +5,7 @@ from qgis.core import (QgsProcessingOutputMultipleLayers, QgsProcessingOutputStr
                        QgsProcessingParameterFile, QgsSingleSymbolRenderer,
                        QgsCategorizedSymbolRenderer)
 
-from ..convert import gisroads_errors, open_geopackage_layers
+from ..loading import open_geopackage_layers
 from .base import GisroadsAlgorithm
 
 
@@ -41,8 +41,7 @@ class OpenRoadNetwork(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         path = self.parameterAsFile(parameters, "INPUT", context)
-        with gisroads_errors():
-            opened = open_geopackage_layers(path)
+        opened = open_geopackage_layers(path)
         # QGIS puts each new layer on top: load polygons (type 2) first, points (0) last
         opened.sort(key=lambda item: -int(item[1].geometryType()))
         styles, ids = {}, []

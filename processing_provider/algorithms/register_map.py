@@ -2,15 +2,13 @@
 from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber)
 
-from gisroads.jobs import register_job, stage_default
-
-from ..convert import gisroads_errors, progress_callback, source_to_frame
 from ..loading import load_geopackage_on_completion
-from .base import GisroadsAlgorithm, cloud_input, road_map_input
+from .base import JobAlgorithm, cloud_input, road_map_input
 
 
-class RegisterRoadMap(GisroadsAlgorithm):
+class RegisterRoadMap(JobAlgorithm):
     NAME = "registerroadmap"
+    JOB = "register_job"
     DISPLAY_NAME = "Register road map to point cloud"
     GROUP = "Map-guided snakes"
     STAGE = 1
@@ -39,24 +37,24 @@ class RegisterRoadMap(GisroadsAlgorithm):
                                   "only along the map"), None),
             (road_map_input(self.tr), None),
             (QgsProcessingParameterNumber("SNAP", self.tr("Intersection snapping (metres)"),
-                                          double, stage_default(register_job, "snap_m"),
+                                          double, self.default("snap_m"),
                                           minValue=0.01, maxValue=50.0),
              "line ends closer than this are one intersection; an end this close to "
              "another line makes a T junction"),
             (QgsProcessingParameterNumber("CONTROL_SPACING",
                                           self.tr("Control vertex spacing (metres)"),
                                           double,
-                                          stage_default(register_job, "control_spacing_m"),
+                                          self.default("control_spacing_m"),
                                           minValue=1.0, maxValue=200.0),
              "spline control vertices along the roads (paper: 15 m)"),
             (QgsProcessingParameterNumber("SUPPORT_RADIUS",
                                           self.tr("Support radius (metres)"),
-                                          double, stage_default(register_job, "support_radius_m"),
+                                          double, self.default("support_radius_m"),
                                           minValue=0.01, maxValue=5.0),
              "points within this distance of a sample fit its elevation (paper: 15 cm); "
              "an airborne cloud of a few points per square metre sees one sample in two"),
             (QgsProcessingParameterNumber("MAX_INCLINE", self.tr("Maximum incline"),
-                                          double, stage_default(register_job, "max_incline"),
+                                          double, self.default("max_incline"),
                                           minValue=0.01, maxValue=2.0),
              "steepest road, rise over run (paper: 0.35)"),
             (QgsProcessingParameterFileDestination("OUTPUT", self.tr("Registered map"),
@@ -70,16 +68,13 @@ class RegisterRoadMap(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
-        lines = source_to_frame(self.parameterAsSource(parameters, "MAP", context), feedback)
-        with gisroads_errors():
-            result = register_job(
-                self.parameterAsFile(parameters, "INPUT", context), lines, out,
-                progress=progress_callback(feedback),
-                snap_m=self.parameterAsDouble(parameters, "SNAP", context),
-                control_spacing_m=self.parameterAsDouble(parameters, "CONTROL_SPACING",
-                                                         context),
-                support_radius_m=self.parameterAsDouble(parameters, "SUPPORT_RADIUS", context),
-                max_incline=self.parameterAsDouble(parameters, "MAX_INCLINE", context))
+        result = self.run_job(dict(
+            cloud_path=self.parameterAsFile(parameters, "INPUT", context),
+            map_source=self.source_path(parameters, "MAP", context, feedback), out_path=out,
+            snap_m=self.parameterAsDouble(parameters, "SNAP", context),
+            control_spacing_m=self.parameterAsDouble(parameters, "CONTROL_SPACING", context),
+            support_radius_m=self.parameterAsDouble(parameters, "SUPPORT_RADIUS", context),
+            max_incline=self.parameterAsDouble(parameters, "MAX_INCLINE", context)), feedback)
         load_geopackage_on_completion(context, out, ("registered_map",), group="snakes")
         feedback.pushInfo(f"{result['roads']} roads, {result['length_m']:.0f} m, "
                           f"{100 * result['seen_fraction']:.0f} % of the samples seen")

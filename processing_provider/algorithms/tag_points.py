@@ -2,14 +2,12 @@
 from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFile,
                        QgsProcessingParameterFileDestination, QgsProcessingParameterNumber)
 
-from gisroads.jobs import stage_default, tag_job
-
-from ..convert import gisroads_errors
-from .base import GisroadsAlgorithm, cloud_input
+from .base import JobAlgorithm, cloud_input
 
 
-class TagRoadPoints(GisroadsAlgorithm):
+class TagRoadPoints(JobAlgorithm):
     NAME = "tagroadpoints"
+    JOB = "tag_job"
     DISPLAY_NAME = "Tag road points"
     GROUP = "LiDAR"
     STAGE = 6
@@ -38,7 +36,7 @@ class TagRoadPoints(GisroadsAlgorithm):
              "Ground planes and intensity image); empty: computed from the cloud"),
             (QgsProcessingParameterNumber("TOLERANCE", self.tr("Height tolerance (metres)"),
                                           QgsProcessingParameterNumber.Double,
-                                          stage_default(tag_job, "tolerance_m"),
+                                          self.default("tolerance_m"),
                                           minValue=0.01, maxValue=5.0),
              "largest height difference between a point and its level's surface"),
             (QgsProcessingParameterFileDestination("OUTPUT", self.tr("Tagged cloud"),
@@ -50,12 +48,10 @@ class TagRoadPoints(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
-        with gisroads_errors(feedback):
-            result = tag_job(self.parameterAsFile(parameters, "INPUT", context),
-                             self.parameterAsFile(parameters, "POLYGONS", context), out,
-                             heights_path=self.parameterAsFile(parameters, "HEIGHTS",
-                                                               context) or None,
-                             tolerance_m=self.parameterAsDouble(parameters, "TOLERANCE",
-                                                                context))
+        result = self.run_job(dict(
+            cloud_path=self.parameterAsFile(parameters, "INPUT", context),
+            polygons_path=self.parameterAsFile(parameters, "POLYGONS", context), out_path=out,
+            heights_path=self.parameterAsFile(parameters, "HEIGHTS", context) or None,
+            tolerance_m=self.parameterAsDouble(parameters, "TOLERANCE", context)), feedback)
         feedback.pushInfo(f"{result['tagged_points']} road points tagged")
         return {"OUTPUT": out, "TAGGED": result["tagged_points"]}

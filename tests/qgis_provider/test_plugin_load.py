@@ -147,9 +147,9 @@ def test_without_a_gisroads_command_the_bar_offers_the_set_up(qgis_app, qgis_ifa
         plugin.provider.use("/opt/gisroads-env/bin/gisroads")
         assert sorted(a.id() for a in plugin.provider.algorithms()) == [
             "gisroads:cityblocks", "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
-            "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork",
-            "gisroads:setupgisroads", "gisroads:syntheticroadscene",
-            "gisroads:trainroadmodel"]
+            "gisroads:openroadnetwork", "gisroads:ribbonsnakeroads",
+            "gisroads:roadrastertonetwork", "gisroads:setupgisroads",
+            "gisroads:syntheticroadscene", "gisroads:trainroadmodel"]
         assert registry.algorithmById("gisroads:lidarroadnetwork").executable == (
             "/opt/gisroads-env/bin/gisroads")
         assert not [i for i in qgis_iface.messageBar().items() if i.title() == "gisroads"]
@@ -235,10 +235,14 @@ def test_external_mode_runs_the_lidar_pipeline_through_gisroads(external_qgis_pr
                                                                lidar_dir, tmp_path):
     listed = external_qgis_process("list")
     assert "Traceback" not in listed.stdout + listed.stderr
-    assert re.findall(r"^\s*(gisroads:\S+)", listed.stdout, flags=re.M) == [
-        "gisroads:cityblocks", "gisroads:imageryroadnetwork", "gisroads:lidarroadnetwork",
-        "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork", "gisroads:setupgisroads",
-        "gisroads:syntheticroadscene", "gisroads:trainroadmodel"]
+    assert sorted(re.findall(r"^\s*(gisroads:\S+)", listed.stdout, flags=re.M)) == [
+        "gisroads:cityblocks", "gisroads:imageryroadnetwork", "gisroads:lidargroundintensity",
+        "gisroads:lidarlikelihood", "gisroads:lidarmincover", "gisroads:lidarroadevidence",
+        "gisroads:lidarroadnetwork", "gisroads:lidarsegmentation", "gisroads:openroadnetwork",
+        "gisroads:rectanglestonetwork",
+        "gisroads:registerroadmap", "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork",
+        "gisroads:setupgisroads", "gisroads:syntheticroadscene", "gisroads:tagroadpoints",
+        "gisroads:trainroadmodel"]
     out = tmp_path / "fusa.gpkg"
     done = external_qgis_process("--json", "run", "gisroads:lidarroadnetwork", "--",
                                  f"INPUT={lidar_dir / 'fusa.laz'}", f"OUTPUT={out}")
@@ -249,6 +253,15 @@ def test_external_mode_runs_the_lidar_pipeline_through_gisroads(external_qgis_pr
     styled = {row[0] for row in con.execute("SELECT f_table_name FROM layer_styles")}
     con.close()
     assert {"road_centrelines", "road_polygons", "junctions"} <= styled
+    # QGIS alone opens it styled; a stage runs through 'gisroads job'
+    styles = json.loads(json.loads(external_qgis_process(
+        "--json", "run", "gisroads:openroadnetwork", "--", f"INPUT={out}").stdout)[
+        "results"]["STYLES"])
+    assert styles["road_centrelines"]["styled_from_file"]
+    evidence = tmp_path / "evidence.tif"
+    done = external_qgis_process("--json", "run", "gisroads:lidarroadevidence", "--",
+                                 f"INPUT={lidar_dir / 'fusa.laz'}", f"OUTPUT={evidence}")
+    assert "intensity" in json.loads(done.stdout)["results"]["CUES"] and evidence.exists()
     # an input error is the command's one line, as a Processing error
     bad = external_qgis_process("run", "gisroads:lidarroadnetwork", "--",
                                 f"INPUT={tmp_path / 'none.laz'}", f"OUTPUT={tmp_path / 'x.gpkg'}",

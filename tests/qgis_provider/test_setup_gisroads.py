@@ -202,7 +202,7 @@ def test_a_stock_qgis_sets_gisroads_up_and_then_lists_its_algorithms(stock_qgis_
     assert stamp["python"].startswith("/usr/bin/python3")  # QGIS's own interpreter
     after = stock_qgis_process("list")
     assert _listed(after) == ["gisroads:cityblocks", "gisroads:imageryroadnetwork",
-                              "gisroads:lidarroadnetwork",
+                              "gisroads:lidarroadnetwork", "gisroads:openroadnetwork",
                               "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork",
                               "gisroads:setupgisroads", "gisroads:syntheticroadscene",
                               "gisroads:trainroadmodel"]

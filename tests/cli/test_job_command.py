@@ -1,0 +1,68 @@
+"""``gisroads job``: one job of gisroads.jobs with JSON arguments (QGIS's external-tool mode
+for the stages), and the ``path|layername=`` sources the jobs read."""
+import json
+import subprocess
+import sys
+
+import geopandas as gpd
+import pytest
+import shapely
+
+from gisroads.errors import GisroadsError
+from gisroads.jobs import JOBS, job_defaults, run_job
+from gisroads.jobs.common import _layer, _map_lines
+from gisroads.lidar.hypotheses import DEFAULT_WIDTHS_M
+from gisroads.synthetic import make_scene
+
+
+def _gisroads(*args):
+    return subprocess.run([sys.executable, "-m", "gisroads.cli", *map(str, args)],
+                          capture_output=True, text=True)
+
+
+def test_defaults_are_the_jobs_signatures_as_json():
+    done = _gisroads("job", "--defaults")
+    assert done.returncode == 0, done.stderr
+    defaults = json.loads(done.stdout)
+    assert set(defaults) == set(JOBS)
+    assert defaults["likelihood_job"]["widths_m"] == list(DEFAULT_WIDTHS_M)
+    assert "progress" not in defaults["evidence_job"]
+    assert defaults == {name: job_defaults(name) for name in JOBS}
+
+
+def test_a_job_runs_from_json_and_bad_arguments_are_one_line(tmp_path):
+    scene = make_scene(seed=2, size_m=(300, 300))
+    rectangles = tmp_path / "r.gpkg"
+    lines = scene.truth.centrelines
+    boxes = gpd.GeoDataFrame(
+        {"width_m": lines.width_m.values,
+         "theta_rad": [0.0] * len(lines)},
+        geometry=shapely.buffer(lines.geometry.values, lines.width_m.values / 2,
+                                cap_style="flat"), crs=lines.crs)
+    # a GeoPackage of two layers: the job reads the one the source names
+    boxes.iloc[:1].to_file(rectangles, layer="other", driver="GPKG")
+    boxes.to_file(rectangles, layer="mine", driver="GPKG")
+    assert len(_layer(f"{rectangles}|layername=mine", "rectangles")) == len(boxes)
+    assert len(_map_lines(f"{rectangles}|layername=other")) == 1
+    out = tmp_path / "roads.gpkg"
+    done = _gisroads("job", "rectangles_network_job",
+                     json.dumps({"rectangles_path": f"{rectangles}|layername=mine",
+                                 "out_path": str(out)}), "--json")
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert result["roads"] > 0 and result["length_m"] > 100 and out.exists()
+    for arguments, message in (('{"out_path": "x.gpkg", "nope": 1}', "takes no nope"),
+                               ("[1]", "a JSON object"), ("{x", "not JSON")):
+        done = _gisroads("job", "rectangles_network_job", arguments)
+        assert done.returncode == 2 and message in done.stderr, done.stderr
+    done = _gisroads("job", "no_such_job")
+    assert done.returncode == 2 and "no job 'no_such_job'" in done.stderr
+    with pytest.raises(GisroadsError, match="takes no nope"):
+        run_job("tag_job", {"nope": 1})
+
+
+def test_likelihood_widths_as_text_are_checked(tmp_path):
+    with pytest.raises(GisroadsError, match="widths"):
+        run_job("likelihood_job", {"intensity_path": "i.tif", "segments_path": "s.tif",
+                                   "likelihood_path": "l.tif",
+                                   "hypotheses_path": "h.gpkg", "widths_m": "6,-9"})

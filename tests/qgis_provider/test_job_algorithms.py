@@ -1,0 +1,184 @@
+"""The stage algorithms that are one job of gisroads.jobs (processing_provider's
+JobAlgorithm): one class, run in-process and through the external ``gisroads job``, on
+fusa.laz, give the same files and results; the external mode takes its defaults from the
+command and says its errors in one line."""
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import geopandas as gpd
+import numpy as np
+import pytest
+
+from gisroads.io.las import read_las
+from gisroads.io.raster import read_raster
+
+
+def _external_gisroads() -> str:
+    found = shutil.which("gisroads", path=str(Path(sys.executable).parent))
+    assert found, "no gisroads command beside this Python"
+    return found
+
+
+@pytest.fixture(scope="module")
+def both_ways(run_algorithm):
+    """``run(name, params, folder)``: the algorithm ``name`` run in-process and external,
+    each writing the outputs (the Paths of ``params``, by file name) into its own folder
+    under ``folder``; ``{mode: (results, its folder)}``."""
+    from qgis.core import (QgsApplication, QgsProcessingContext, QgsProcessingFeedback)
+
+    from processing_provider.external import JOB_ALGORITHMS
+
+    registry = QgsApplication.processingRegistry()  # run_algorithm added the provider
+    executable = _external_gisroads()
+
+    def run(name, params, folder: Path):
+        cls = next(c for c in JOB_ALGORITHMS if c.NAME == name)
+        runs = {}
+        external = cls(executable)
+        external.initAlgorithm()
+        for mode, algorithm in (("in-process", registry.createAlgorithmById(f"gisroads:{name}")),
+                                ("external", external)):
+            out = folder / mode
+            out.mkdir(parents=True, exist_ok=True)
+            # a Path names an output: each mode writes its own under folder/mode
+            these = {k: str(out / v.name) if isinstance(v, Path) else v
+                     for k, v in params.items()}
+            context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
+            assert algorithm.prepare(these, context, feedback)
+            runs[mode] = (algorithm.runPrepared(these, context, feedback), out)
+        return runs
+
+    return run
+
+
+def test_the_external_mode_takes_its_defaults_from_the_command(qgis_app):
+    """Same parameters, types and defaults whichever way they were read."""
+    from processing_provider.external import JOB_ALGORITHMS
+
+    for cls in JOB_ALGORITHMS:
+        ours, theirs = cls(), cls(_external_gisroads())
+        ours.initAlgorithm()
+        theirs.initAlgorithm()
+        assert [(p.name(), p.type(), p.defaultValue()) for p in ours.parameterDefinitions()] \
+            == [(p.name(), p.type(), p.defaultValue())
+                for p in theirs.parameterDefinitions()], cls.NAME
+
+
+def test_ground_intensity_and_segments_of_fusa_both_ways(both_ways, lidar_dir, tmp_path):
+    ground = both_ways("lidargroundintensity",
+                       {"INPUT": str(lidar_dir / "fusa.laz"),
+                        "OUTPUT": tmp_path / "intensity.tif",
+                        "HEIGHTS": tmp_path / "heights.tif"}, tmp_path)
+    (ours, here), (theirs, there) = ground["in-process"], ground["external"]
+    assert ours["LEVELS"] == theirs["LEVELS"] >= 1 and ours["CELL_M"] == theirs["CELL_M"]
+    for name in ("intensity.tif", "heights.tif"):
+        np.testing.assert_array_equal(read_raster(here / name).data,
+                                      read_raster(there / name).data)
+    segments = both_ways("lidarsegmentation",
+                         {"INPUT": str(here / "intensity.tif"), "SEGMENTS": 60,
+                          "OUTPUT": tmp_path / "segments.tif"}, tmp_path / "segments")
+    (ours, here), (theirs, there) = segments["in-process"], segments["external"]
+    a = read_raster(here / "segments.tif").data[0]
+    b = read_raster(there / "segments.tif").data[0]
+    # one NCut; its eigenvectors may differ in the last bits between processes
+    assert np.array_equal(a >= 0, b >= 0)
+    assert abs(ours["N_SEGMENTS"] - theirs["N_SEGMENTS"]) <= 0.1 * ours["N_SEGMENTS"]
+    assert ours["N_SEGMENTS"] >= 60
+    # the later stages from one set of inputs (the in-process segments)
+    likelihood = both_ways("lidarlikelihood",
+                           {"INPUT": str(tmp_path / "in-process" / "intensity.tif"),
+                            "SEGMENTS": str(here / "segments.tif"), "LENGTHS": "40,80",
+                            "OUTPUT": tmp_path / "likelihood.tif",
+                            "HYPOTHESES": tmp_path / "hypotheses.gpkg"}, tmp_path / "maps")
+    (ours, here), (theirs, there) = likelihood["in-process"], likelihood["external"]
+    assert ours["N_HYPOTHESES"] == theirs["N_HYPOTHESES"] > 0
+    np.testing.assert_array_equal(read_raster(here / "likelihood.tif").data,
+                                  read_raster(there / "likelihood.tif").data)
+    cover = both_ways("lidarmincover",
+                      {"INPUT": f"{here / 'hypotheses.gpkg'}|layername=hypotheses",
+                       "LIKELIHOOD": str(here / "likelihood.tif"),
+                       "OUTPUT": tmp_path / "rectangles.gpkg"}, tmp_path / "cover")
+    (ours, here), (theirs, there) = cover["in-process"], cover["external"]
+    assert ours["N_RECTANGLES"] == theirs["N_RECTANGLES"] > 0
+    assert ours["COVER_COST"] == pytest.approx(theirs["COVER_COST"], rel=1e-12)
+    network = both_ways("rectanglestonetwork",
+                        {"INPUT": f"{here / 'rectangles.gpkg'}|layername=rectangles",
+                         "OUTPUT": tmp_path / "roads.gpkg"}, tmp_path / "network")
+    (ours, _), (theirs, _) = network["in-process"], network["external"]
+    assert ours["ROADS"] == theirs["ROADS"] > 0
+    assert ours["LENGTH_M"] == pytest.approx(theirs["LENGTH_M"], rel=1e-12)
+
+
+def test_road_evidence_and_tagged_points_of_fusa_both_ways(both_ways, lidar_dir, tmp_path):
+    evidence = both_ways("lidarroadevidence", {"INPUT": str(lidar_dir / "fusa.laz"),
+                                               "OUTPUT": tmp_path / "evidence.tif"}, tmp_path)
+    (ours, here), (theirs, there) = evidence["in-process"], evidence["external"]
+    assert ours["CUES"] == theirs["CUES"] and "intensity" in ours["CUES"]
+    np.testing.assert_array_equal(read_raster(here / "evidence.tif").data,
+                                  read_raster(there / "evidence.tif").data)
+    # fusa's digitised road area as the road polygons, on level 0
+    polygons = tmp_path / "road_area.gpkg"
+    area = gpd.read_file(lidar_dir / "ground_truth" / "fusa" / "road_area.geojson")
+    area.assign(level=0).to_file(polygons, layer="road_polygons", driver="GPKG")
+    tagged = both_ways("tagroadpoints", {"INPUT": str(lidar_dir / "fusa.laz"),
+                                         "POLYGONS": str(polygons),
+                                         "OUTPUT": tmp_path / "tagged.laz"},
+                       tmp_path / "tagged")
+    (ours, here), (theirs, there) = tagged["in-process"], tagged["external"]
+    assert ours["TAGGED"] == theirs["TAGGED"] > 10000
+    np.testing.assert_array_equal(read_las(here / "tagged.laz").classification,
+                                  read_las(there / "tagged.laz").classification)
+
+
+def test_an_external_stage_says_its_error_in_one_line(qgis_app, lidar_dir, tmp_path):
+    from qgis.core import (QgsProcessingContext, QgsProcessingException,
+                           QgsProcessingFeedback)
+
+    from processing_provider.algorithms.lidar_ground_intensity import LidarGroundIntensity
+
+    algorithm = LidarGroundIntensity(_external_gisroads())
+    algorithm.initAlgorithm()
+    params = {"INPUT": str(tmp_path / "none.laz"), "OUTPUT": str(tmp_path / "i.tif"),
+              "HEIGHTS": str(tmp_path / "h.tif")}
+    context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
+    assert algorithm.prepare(params, context, feedback)
+    with pytest.raises(QgsProcessingException, match="none.laz: no such file"):
+        algorithm.runPrepared(params, context, feedback)
+    assert not list(tmp_path.glob("*.tif"))
+
+
+def test_gisroads_job_runs_a_job_and_reports_its_defaults(lidar_dir, tmp_path):
+    import subprocess
+
+    gisroads = _external_gisroads()
+    done = subprocess.run([gisroads, "job", "--defaults"], capture_output=True, text=True)
+    defaults = json.loads(done.stdout)
+    assert defaults["ground_intensity_job"]["t_planar"] == 0.01      # the paper's
+    assert defaults["likelihood_job"]["widths_m"] == [6.0, 9.0, 12.0, 16.0, 20.0, 25.0]
+    out = tmp_path / "evidence.tif"
+    done = subprocess.run([gisroads, "job", "evidence_job",
+                           json.dumps({"cloud_path": str(lidar_dir / "fusa.laz"),
+                                       "out_path": str(out)}), "--json"],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["raster"] == str(out) and out.exists()
+    for arguments, message in (('{"cloud_path": 1, "nope": 2}', "evidence_job takes no nope"),
+                               ("[1]", "a JSON object"), ("{x", "not JSON")):
+        done = subprocess.run([gisroads, "job", "evidence_job", arguments],
+                              capture_output=True, text=True)
+        assert done.returncode == 2 and message in done.stderr, done.stderr
+
+
+def test_register_map_of_fusa_both_ways(both_ways, lidar_dir, tmp_path):
+    truth = str(lidar_dir / "ground_truth" / "fusa" / "centrelines.geojson")
+    runs = both_ways("registerroadmap", {"INPUT": str(lidar_dir / "fusa.laz"), "MAP": truth,
+                                         "OUTPUT": tmp_path / "registered.gpkg"}, tmp_path)
+    (ours, here), (theirs, there) = runs["in-process"], runs["external"]
+    assert ours["ROADS"] == theirs["ROADS"] >= 7
+    # a 15 cm support radius at 4.4 points/m2: about one sample in three sees the road
+    assert ours["SEEN_FRACTION"] == theirs["SEEN_FRACTION"] > 0.2
+    a = gpd.read_file(here / "registered.gpkg", layer="registered_map")
+    b = gpd.read_file(there / "registered.gpkg", layer="registered_map")
+    assert a.geometry.equals(b.geometry)
