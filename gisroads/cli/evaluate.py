@@ -32,6 +32,9 @@ def add_parser(subparsers) -> None:
                    help="reference road area (default: its road_polygons layer)")
     p.add_argument("--valid-area", type=Path,
                    help="polygon file: score only inside it (e.g. the surveyed area)")
+    p.add_argument("--reference-junctions", type=Path,
+                   help="point file of the reference's digitised junctions (default: the "
+                        "nodes where three or more of its lines meet)")
     p.add_argument("--qa", type=Path,
                    help="write matched/missed/false pieces to this GeoPackage")
 
@@ -43,6 +46,7 @@ def run(args) -> int:
                            cell_m=args.cell, junction_radius_m=args.junction_radius,
                            extracted_polygons=args.extracted_polygons,
                            reference_polygons=args.reference_polygons,
+                           reference_junctions=args.reference_junctions,
                            valid_area=args.valid_area, qa_path=args.qa,
                            progress=ProgressBar(not args.json))
     print_result(results, args.json, format_report(results))

@@ -26,6 +26,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--tagged-las", type=Path,
                    help="also write the cloud with road points classified 11")
     p.add_argument("--attractor", type=Path, help="also write the attractor map (GeoTIFF)")
+    p.add_argument("--quicklook", type=Path,
+                   help="also draw a PNG of the ribbons and the map over the attractor")
     add_parallel_options(p, "road patches")
     add_database_options(p)
 
@@ -35,6 +37,7 @@ def run(args) -> int:
     from ..parallel import default_workers
     result = snakes_job(args.input, args.map, args.out, curb_detector=args.curb_detector,
                         tagged_las=args.tagged_las, attractor_tif=args.attractor,
+                        quicklook=args.quicklook,
                         workers=args.workers or default_workers(), scheduler=args.scheduler,
                         work_dir=args.work_dir, progress=ProgressBar(not args.json))
     print_result(then_compare(args, result), args.json)

@@ -36,6 +36,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--coverage", type=Path,
                    help="where the data could show a road: polygons, or a raster with "
                         "non-zero observable cells (data footprint minus occlusion)")
+    p.add_argument("--quicklook", type=Path,
+                   help="also draw a PNG of the changes over the database's roads")
 
 
 def run(args) -> int:
@@ -43,6 +45,21 @@ def run(args) -> int:
     result = update_job(args.extracted, args.database, args.out, layer=args.layer,
                         id_field=args.id_field, width_field=args.width_field,
                         tolerance_m=args.tolerance, search_m=args.search,
-                        coverage=args.coverage, progress=ProgressBar(not args.json))
-    print_result(result, args.json)
+                        coverage=args.coverage, quicklook=args.quicklook,
+                        progress=ProgressBar(not args.json))
+    print_result(result, args.json, _summary(result))
     return 0
+
+
+def _summary(result: dict) -> str:
+    """The counts in words: the layers hold features (a missing stretch of a road that is
+    otherwise seen is one), the changes count database roads."""
+    from ..update import LAYERS
+    layers = ", ".join(f"{name} {result[name]}" for name in LAYERS)
+    roads = ", ".join(f"{name} {count}" for name, count in result["changes"].items())
+    lines = [f"gpkg: {result['gpkg']}", f"features per layer: {layers}",
+             f"database roads by change: {roads} (missing: the whole road unseen; new: "
+             "extracted roads the database lacks)"]
+    if "quicklook" in result:
+        lines.append(f"quicklook: {result['quicklook']}")
+    return "\n".join(lines)

@@ -21,8 +21,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--threshold", type=float, default=job_default(vectorize_job, "threshold"),
                    help="road probability threshold, 0-1 (a 0-255 raster is scaled to 0-1 "
                         "first; default %(default)g)")
-    p.add_argument("--band", type=int, default=job_default(vectorize_job, "band"),
-                   help="1-based band to read (default %(default)s)")
+    p.add_argument("--band", type=int,
+                   help="1-based band to read (default: the first of a one- or two-band "
+                        "raster; a raster of three or more bands needs it)")
     add_georeferencing_options(p, "a raster")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
 

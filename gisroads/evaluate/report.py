@@ -4,16 +4,18 @@ from __future__ import annotations
 import math
 
 import geopandas as gpd
+import shapely
 
 from .apls import apls_score
 from .area import area_metrics
-from .buffer import buffer_metrics, metric_lines
+from .buffer import align_to_reference, buffer_metrics, metric_lines, typed_parts
 from .topology import topology_metrics
 
 
 def evaluate_network(extracted, reference, *, buffer_m: float = 3.0, cell_m: float = 0.5,
                      junction_radius_m: float = 10.0, valid_area=None,
-                     extracted_polygons=None, reference_polygons=None) -> dict:
+                     extracted_polygons=None, reference_polygons=None,
+                     reference_junctions=None) -> dict:
     """Buffer, topology, APLS and (given both polygon sets) area metrics of a road network.
 
     The centre lines are aligned to one metric CRS and clipped to ``valid_area`` once, and
@@ -33,6 +35,10 @@ def evaluate_network(extracted, reference, *, buffer_m: float = 3.0, cell_m: flo
         Where the reference is complete; everything outside is ignored.
     extracted_polygons, reference_polygons : GeoDataFrame, optional
         Road areas; the ``area`` group is computed only when both are given.
+    reference_junctions : GeoDataFrame, optional
+        The reference's digitised junctions (points); by default they are derived from its
+        lines (see :func:`~gisroads.evaluate.topology.topology_metrics`). Those outside
+        ``valid_area`` are left out.
 
     Returns
     -------
@@ -64,9 +70,16 @@ def evaluate_network(extracted, reference, *, buffer_m: float = 3.0, cell_m: flo
     """
     ext, ref, crs = metric_lines(extracted, reference, valid_area=valid_area)
     ext, ref = gpd.GeoSeries(ext, crs=crs), gpd.GeoSeries(ref, crs=crs)
+    if reference_junctions is not None and valid_area is not None:
+        _, _, (points, area) = align_to_reference(reference, reference_junctions, valid_area)
+        area = shapely.union_all(typed_parts(area, (shapely.GeometryType.POLYGON,
+                                                    shapely.GeometryType.MULTIPOLYGON),
+                                             layer="valid area"))
+        reference_junctions = gpd.GeoSeries(points[shapely.intersects(points, area)], crs=crs)
     results = {
         "buffer": buffer_metrics(ext, ref, buffer_m=buffer_m).as_dict(),
-        "topology": topology_metrics(ext, ref, junction_radius_m=junction_radius_m),
+        "topology": topology_metrics(ext, ref, junction_radius_m=junction_radius_m,
+                                     reference_junctions=reference_junctions),
         "apls": apls_score(ext, ref),
     }
     if extracted_polygons is not None and reference_polygons is not None:
@@ -77,6 +90,13 @@ def evaluate_network(extracted, reference, *, buffer_m: float = 3.0, cell_m: flo
 
 def _percent(value: float) -> str:
     return "n/a" if math.isnan(value) else f"{100 * value:.1f} %"
+
+
+def _direction(value: float) -> str:
+    """The spill direction, in [-1, 1], and which way it points."""
+    if math.isnan(value):
+        return "n/a"
+    return f"{value:+.2f} ({'outward' if value > 0 else 'inward' if value < 0 else 'none'})"
 
 
 def _metres(value: float) -> str:
@@ -107,5 +127,5 @@ def format_report(results: dict) -> str:
             f"Area ({_metres(r['cell_m'])} cells): precision {_percent(r['precision'])}, "
             f"recall {_percent(r['recall'])}, quality {_percent(r['quality'])}, "
             f"spill size {_metres(r['spill_size_m'])}, spill direction "
-            f"{_percent(r['spill_direction'])}")
+            f"{_direction(r['spill_direction'])}")
     return "\n".join(lines)

@@ -92,7 +92,8 @@ def junction_metrics(extracted_points, reference_points, *, radius_m: float = 10
     return _junction_scores(ext_xy, ref_xy, radius_m)
 
 
-def topology_metrics(extracted, reference, *, junction_radius_m: float = 10.0) -> dict:
+def topology_metrics(extracted, reference, *, junction_radius_m: float = 10.0,
+                     reference_junctions=None) -> dict:
     """Connected components and junction agreement of two centre-line networks.
 
     Parameters
@@ -101,14 +102,17 @@ def topology_metrics(extracted, reference, *, junction_radius_m: float = 10.0) -
         Centre lines; the input rules of :mod:`gisroads.evaluate.buffer` apply.
     junction_radius_m : float
         Radius for matching junctions, metres (see :func:`junction_metrics`).
+    reference_junctions : GeoDataFrame, GeoSeries or sequence of Point, optional
+        The reference's own junctions (digitised with it); by default its nodes of degree
+        >= 3, which miss the junctions its lines do not share a vertex at.
 
     Returns
     -------
     dict
         ``components_extracted``, ``components_reference``: connected components of the
         noded networks (0 for an empty network); the keys of :func:`junction_metrics` for
-        their junctions (nodes of degree >= 3). ``junction_recall`` is NaN when the reference
-        has no junction.
+        their junctions (nodes of degree >= 3; the reference's given ones).
+        ``junction_recall`` is NaN when the reference has no junction.
     """
     ext, ref, _ = metric_lines(extracted, reference)
     scores = {}
@@ -117,6 +121,10 @@ def topology_metrics(extracted, reference, *, junction_radius_m: float = 10.0) -
         graph = line_graph(lines)
         scores[f"components_{name}"] = graph.components()[0]
         junctions[name] = graph.nodes[graph.degree >= 3]
+    if reference_junctions is not None:
+        _, _, (points,) = align_to_reference(reference, reference_junctions)
+        junctions["reference"] = shapely.get_coordinates(typed_parts(
+            points, (shapely.GeometryType.POINT,), layer="reference junctions"))
     scores.update(_junction_scores(junctions["extracted"], junctions["reference"],
                                    junction_radius_m))
     return scores

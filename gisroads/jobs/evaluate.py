@@ -71,12 +71,14 @@ def evaluate_job(extracted, reference, *,
                  junction_radius_m: float = stage_default(evaluate_network,
                                                           "junction_radius_m"),
                  extracted_polygons=None, reference_polygons=None, valid_area=None,
-                 qa_path=None, progress: Progress = None) -> dict:
+                 reference_junctions=None, qa_path=None, progress: Progress = None) -> dict:
     """Score an extracted road network against a reference, from files.
 
     Centre lines come from the ``road_centrelines`` layer of a GeoPackage (else its first
     layer) or from any line file; road areas from the ``road_polygons`` layers of both
-    GeoPackages or from the files given. ``qa_path`` receives the matched/unmatched pieces
+    GeoPackages or from the files given; the reference's junctions from
+    ``reference_junctions`` (a point file) when given, else from its lines. ``qa_path``
+    receives the matched/unmatched pieces
     (``eval_extracted``, ``eval_reference``) as a styled GeoPackage.
 
     Returns
@@ -93,11 +95,12 @@ def evaluate_job(extracted, reference, *,
                  else _read_polygons(extracted))
     truth = read_layer(reference_polygons) if reference_polygons else _read_polygons(reference)
     valid = read_layer(valid_area) if valid_area else None
+    junctions = read_layer(reference_junctions) if reference_junctions else None
     report(progress, 0.1, "scoring")
     results = evaluate_network(extracted_lines, reference_lines, buffer_m=buffer_m,
                                cell_m=cell_m, junction_radius_m=junction_radius_m,
                                valid_area=valid, extracted_polygons=predicted,
-                               reference_polygons=truth)
+                               reference_polygons=truth, reference_junctions=junctions)
     if qa_path is not None:
         report(progress, 0.9, "writing the QA layers")
         write_geopackage(qa_path, match_layers(extracted_lines, reference_lines,

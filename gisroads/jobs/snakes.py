@@ -8,6 +8,7 @@ import shapely
 
 from ..errors import GisroadsError
 from ..io.las import cloud_crs
+from ..io.quicklook import write_quicklook
 from ..io.raster import write_geotiff
 from ..io.vector import write_geopackage
 from ..progress import Progress, report, scaled
@@ -38,7 +39,7 @@ def snakes_job(cloud_path, map_source, out_path, *,
                curb_detector: str = stage_default(extract_map_guided, "curb_detector"),
                cell_m: float = stage_default(extract_map_guided, "cell_m"),
                snap_m: float | None = None, clearance_m: float = CLEARANCE_M,
-               tagged_las=None, attractor_tif=None, workers: int = 1,
+               tagged_las=None, attractor_tif=None, quicklook=None, workers: int = 1,
                scheduler: str | None = None, work_dir=None, progress: Progress = None) -> dict:
     """Map-guided road extraction with ribbon snakes (Boyko & Funkhouser, 2011).
 
@@ -47,14 +48,16 @@ def snakes_job(cloud_path, map_source, out_path, *,
     GeoDataFrame, in any CRS: reprojected to the cloud's.
     Writes ``out_path`` (road_centrelines, road_polygons, junctions and the QA layers
     ribbon_patches and registered_map) in the cloud's CRS; optionally ``tagged_las`` (the
-    cloud with road points in class 11) and ``attractor_tif`` (the patches' attractor
-    maps). The parameters as in :func:`gisroads.snakes.pipeline.extract_map_guided`. When
-    no road is fitted the layers are empty, with a :class:`~gisroads.errors.NoRoadFoundWarning`.
+    cloud with road points in class 11), ``attractor_tif`` (the patches' attractor maps)
+    and a ``quicklook`` PNG (the ribbons and the map over the attractor maps). The
+    parameters as in :func:`gisroads.snakes.pipeline.extract_map_guided`. When no road is
+    fitted the layers are empty, with a :class:`~gisroads.errors.NoRoadFoundWarning`.
     """
     roads = extract_map_guided(cloud_path, _map_lines(map_source), curb_detector=curb_detector,
                                cell_m=cell_m, snap_m=snap_m, clearance_m=clearance_m,
                                tagged_las=tagged_las, workers=workers, scheduler=scheduler,
-                               work_dir=work_dir, attractor=attractor_tif is not None,
+                               work_dir=work_dir,
+                               attractor=attractor_tif is not None or quicklook is not None,
                                progress=scaled(progress, 0.0, 0.95))
     network = roads.network
     write_geopackage(out_path, network.layers())
@@ -66,6 +69,22 @@ def snakes_job(cloud_path, map_source, out_path, *,
     if attractor_tif is not None and roads.attractor is not None:
         result["attractor"] = write_geotiff(attractor_tif, roads.attractor,
                                             band_names=["attractor"])
+    if quicklook is not None:
+        report(progress, 0.97, "drawing the quick-look")
+        crs = network.polygons.crs if roads.attractor is None else roads.attractor.crs
+        write_quicklook(quicklook, [
+            (_map_lines(map_source).to_crs(crs),
+             dict(color="deepskyblue", linewidth=1, linestyle="--", label="road map")),
+            (network.polygons.to_crs(crs), dict(facecolor="orange", edgecolor="darkorange",
+                                                alpha=0.45, linewidth=0.8)),
+            (network.centrelines.to_crs(crs),
+             dict(color="red", linewidth=1.2, label="road centre lines")),
+            (network.junctions.to_crs(crs),
+             dict(color="yellow", markersize=20, label="junctions")),
+        ], background=roads.attractor,
+            title=f"{Path(str(cloud_path)).name}: {len(roads.ribbons)} ribbons over the curb "
+                  "attractor")
+        result["quicklook"] = Path(quicklook)
     report(progress, 1.0, "done")
     return result
 

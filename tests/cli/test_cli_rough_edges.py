@@ -243,3 +243,26 @@ def test_sigterm_cancels_and_leaves_nothing(tmp_path):
     assert "Traceback" not in rest
     written = [p for p in out.rglob("*") if p.is_file()]
     assert not [p for p in written if p.suffix in {".gpkg", ".tif"} or p.name.startswith(".")]
+
+
+def test_vectorize_refuses_a_photo_unless_a_band_is_named(tmp_path):
+    """An RGB photo read as a probability drew junk roads; now it says what it expects."""
+    from gisroads.jobs import DEMO_IMAGE
+    from gisroads.resources import demo_dir
+
+    photo = demo_dir() / DEMO_IMAGE
+    line = one_line_error(gisroads("vectorize", photo, "-o", tmp_path / "r.gpkg"))
+    assert "3 bands, like an image" in line and "--band" in line and "gisroads image" in line
+    assert not (tmp_path / "r.gpkg").exists()
+    named = gisroads("vectorize", photo, "-o", tmp_path / "r.gpkg", "--band", "1")
+    assert named.returncode == 0, named.stderr
+
+
+def test_evaluate_takes_the_reference_junctions(lidar_dir):
+    """fusa's truth has 7 digitised junctions; its lines share a vertex at 3 of them."""
+    truth = lidar_dir / "ground_truth" / "fusa"
+    derived = gisroads("evaluate", truth / "centrelines.geojson", truth / "centrelines.geojson")
+    assert "3 reference" in derived.stdout, derived.stderr
+    given = gisroads("evaluate", truth / "centrelines.geojson", truth / "centrelines.geojson",
+                     "--reference-junctions", truth / "junctions.geojson")
+    assert "7 reference" in given.stdout, given.stderr

@@ -87,3 +87,32 @@ def test_format_report_marks_undefined_values():
     results = evaluate_network(gpd.GeoSeries([], crs=UTM), grid())
     assert math.isnan(results["buffer"]["correctness"])
     assert "correctness n/a" in format_report(results)
+
+
+def test_reference_junctions_replace_the_derived_ones():
+    """A reference digitised with its junctions (fusa's has 7 where its lines share 3
+    vertices) is scored on them; given in another CRS, clipped to the valid area."""
+    from shapely import Point
+
+    extracted, reference = grid((2.0, 0.0)), grid()
+    crossings = [Point(500000.0 + 100 * i, 5000000.0 + 100 * j)
+                 for i in range(4) for j in range(4)]
+    given = gpd.GeoDataFrame(geometry=crossings[:10], crs=UTM).to_crs("EPSG:4326")
+    derived = evaluate_network(extracted, reference)["topology"]
+    scored = evaluate_network(extracted, reference, reference_junctions=given)["topology"]
+    assert derived["junctions_reference"] == 16
+    assert scored["junctions_reference"] == scored["junction_matches"] == 10
+    assert scored["junction_recall"] == 1.0
+    # the first ten crossings are columns i = 0, 1 and half of i = 2; keep x <= 500150
+    area = gpd.GeoDataFrame(geometry=[box(499900, 4999900, 500150, 5000400)], crs=UTM)
+    clipped = evaluate_network(extracted, reference, reference_junctions=given,
+                               valid_area=area)["topology"]
+    assert clipped["junctions_reference"] == 8
+
+
+def test_the_spill_direction_reads_as_a_signed_share():
+    extracted, reference = grid(), grid()
+    results = evaluate_network(extracted, reference, extracted_polygons=roads(extracted, 8.0),
+                               reference_polygons=roads(reference))
+    assert results["area"]["spill_direction"] == 1.0
+    assert "spill direction +1.00 (outward)" in format_report(results)

@@ -115,3 +115,23 @@ def test_bad_database_is_one_error_line(files, tmp_path, capsys):
     assert status == 2
     assert "cannot be read" in capsys.readouterr().err
     assert not list(tmp_path.glob("*.gpkg"))
+
+
+def test_update_draws_its_changes_and_says_what_it_counts(files, capsys):
+    """The quick-look shows the fakes as missing (red) and the deleted roads as new
+    (green) over the database; the summary tells layer features from database roads (it
+    printed "missing: 3", then "missing 0")."""
+    from matplotlib.image import imread
+
+    folder, edited = files
+    png = folder / "changes.png"
+    status = main(["update", str(folder / "extracted.gpkg"), str(folder / "roads.shp"),
+                   "-o", str(folder / "drawn.gpkg"), "--quicklook", str(png)])
+    assert status == 0
+    text = capsys.readouterr().out
+    assert "features per layer: confirmed" in text and "database roads by change:" in text
+    assert f"quicklook: {png}" in text
+    pixels = imread(png)[..., :3]
+    red = (pixels[..., 0] > 0.9) & (pixels[..., 1] < 0.1) & (pixels[..., 2] < 0.1)
+    green = (pixels[..., 1] > 0.7) & (pixels[..., 0] < 0.3) & (pixels[..., 2] < 0.3)
+    assert red.sum() > 100 and green.sum() > 100
