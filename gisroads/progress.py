@@ -26,11 +26,14 @@ def report(progress: Progress, fraction: float, message: str = "") -> None:
         progress(min(max(float(fraction), 0.0), 1.0), message)
 
 
-def scaled(progress: Progress, start: float, stop: float) -> Progress:
-    """A callback mapping [0, 1] of a sub-step onto [start, stop] of the whole job."""
+def scaled(progress: Progress, start: float, stop: float, label: str = "") -> Progress:
+    """A callback mapping [0, 1] of a sub-step onto [start, stop] of the whole job; its
+    messages start with ``label: `` when one is given (a job of several pipelines)."""
     if progress is None:
         return None
-    return lambda fraction, message="": progress(start + (stop - start) * fraction, message)
+    prefix = f"{label}: " if label else ""
+    return lambda fraction, message="": progress(start + (stop - start) * fraction,
+                                                 prefix + message)
 
 
 def _plain(value):

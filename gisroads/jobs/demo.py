@@ -38,17 +38,19 @@ def demo_job(out_dir, *, data_dir=None, progress: Progress = None) -> dict:
     data, out = Path(demo_dir() if data_dir is None else data_dir), Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     image = image_job(data / DEMO_IMAGE, out / "image_roads.gpkg",
-                      quicklook=out / "image_roads.png", progress=scaled(progress, 0.0, 0.3))
+                      quicklook=out / "image_roads.png",
+                      progress=scaled(progress, 0.0, 0.3, "imagery"))
     footprint = gpd.GeoDataFrame(geometry=[shapely.box(*read_raster(data / DEMO_IMAGE).bounds)],
                                  crs=read_layer(out / "image_roads.gpkg", CENTRELINES).crs)
     evaluation = evaluate_network(read_layer(out / "image_roads.gpkg", CENTRELINES),
                                   read_layer(data / DEMO_IMAGE_TRUTH), valid_area=footprint)
     (out / "image_evaluation.json").write_text(to_json(evaluation))
     lidar = lidar_job(data / DEMO_CLOUD, out / "lidar_roads.gpkg",
-                      quicklook=out / "lidar_roads.png", progress=scaled(progress, 0.3, 0.85))
+                      quicklook=out / "lidar_roads.png",
+                      progress=scaled(progress, 0.3, 0.85, "LiDAR"))
     intensity = lidar_job(data / DEMO_CLOUD, out / "lidar_intensity_roads.gpkg",
                           cue="intensity", quicklook=out / "lidar_intensity_roads.png",
-                          progress=scaled(progress, 0.85, 1.0))
+                          progress=scaled(progress, 0.85, 1.0, "LiDAR, the paper's cue"))
     report(progress, 1.0, "done")
     return {"image": image, "image_evaluation": evaluation,
             "image_report": format_report(evaluation), "lidar": lidar,

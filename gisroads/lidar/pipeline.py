@@ -491,6 +491,8 @@ def _evidence_roads(path, *, threshold: float, network_options: dict | None, mod
                                         progress=scaled(progress, 0.8, 1.0), **options)
         network.qa[SERVICE_CENTRELINES] = service_lines(taken.query("reason == 'car-park aisle'"))
     network.qa.setdefault(SERVICE_CENTRELINES, service_lines(network.centrelines.iloc[:0]))
+    report(progress, 1.0, f"{len(network.centrelines)} roads, {len(network.junctions)} "
+                          f"junctions, {len(network.qa[SERVICE_CENTRELINES])} service ways")
     network.centrelines["kind"] = "road"
     network.centrelines["cues"] = ",".join(used)
     network.polygons["level"] = np.zeros(len(network.polygons), np.int64)

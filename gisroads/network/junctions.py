@@ -886,6 +886,5 @@ def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
              "score": score, "method": method},
             geometry=gpd.GeoSeries(merged, crs=roads.crs), crs=roads.crs), method=method,
             qa=qa)
-    report(progress, 1.0, f"{len(network.centrelines)} roads, "
-                          f"{len(network.junctions)} junctions")
+    report(progress, 1.0, "network built")
     return network, connections

@@ -628,11 +628,13 @@ def parts_to_network(parts: gpd.GeoDataFrame, *, extent, crs, method: str = METH
                               weight_options=weight_options)
     strings, blobs = drop_blobs(strings)
     network, _ = strings_to_network(strings, extent=extent, crs=crs, method=method,
-                                    progress=scaled(progress, 0.25, 1.0),
+                                    progress=scaled(progress, 0.25, 0.95),
                                     unsupported=unsupported,
                                     **{**NETWORK_OPTIONS, **(network_options or {})})
     _clip_to_extent(network, shapely.box(*extent) if observed is None else observed)
     network.qa["gap_edges"] = gaps
+    report(progress, 1.0, f"{len(network.centrelines)} roads, "
+                          f"{len(network.junctions)} junctions")
     return network
 
 

@@ -159,9 +159,14 @@ def test_lidar_on_a_cloud_without_roads_writes_empty_layers_and_warns(lidar_dir,
 
 
 def test_demo_runs_both_pipelines_on_the_bundled_data(tmp_path):
-    result = gisroads("demo", "--out", tmp_path, "--json")
+    result = gisroads("demo", "--out", tmp_path, "--json", "--progress-json")
     assert result.returncode == 0, result.stderr
     demo = json.loads(result.stdout)
+    # the progress says which pipeline is running
+    messages = [json.loads(line)["message"] for line in result.stderr.splitlines()
+                if line.startswith("{")]
+    labels = {m.split(":")[0] for m in messages[:-1] if m}
+    assert labels == {"imagery", "LiDAR", "LiDAR, the paper's cue"}, labels
     # the default path: the convolutional network's probability through the network stage;
     # on this tile it draws the N-S street, most of the NE street and the SE one (4 roads,
     # 379 m), not the street in shadow

@@ -266,3 +266,15 @@ def test_evaluate_takes_the_reference_junctions(lidar_dir):
     given = gisroads("evaluate", truth / "centrelines.geojson", truth / "centrelines.geojson",
                      "--reference-junctions", truth / "junctions.geojson")
     assert "7 reference" in given.stdout, given.stderr
+
+
+def test_the_last_count_in_the_progress_is_the_summarys(lidar_dir, tmp_path):
+    """The progress said "30 roads" and the summary 31: the network stage counted before
+    its clip to the data."""
+    done = gisroads("lidar", lidar_dir / "fusa.laz", "-o", tmp_path / "r.gpkg", "--json",
+                    "--progress-json")
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    events = [json.loads(line) for line in done.stderr.splitlines() if line.startswith("{")]
+    counts = [e["message"] for e in events if " roads, " in e["message"]]
+    assert counts[-1].startswith(f"{result['roads']} roads, {result['junctions']} junctions")
