@@ -27,6 +27,7 @@ from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutpu
 
 from .algorithms.base import (add_scene_parameters, background_output, city_blocks_parameters,
                               train_parameters, workers_parameter)
+from .algorithms.curb_attractor import CurbAttractorMap
 from .algorithms.lidar_evidence import LidarRoadEvidence
 from .algorithms.lidar_ground_intensity import LidarGroundIntensity
 from .algorithms.lidar_likelihood import LidarLikelihood
@@ -426,6 +427,7 @@ EXTERNAL_ALGORITHMS = (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork,
 """The algorithms that run through the external ``gisroads``: same ids as in-process."""
 
 JOB_ALGORITHMS = (LidarGroundIntensity, LidarSegmentation, LidarLikelihood, LidarMinCover,
-                  RectanglesToNetwork, LidarRoadEvidence, TagRoadPoints, RegisterRoadMap)
+                  RectanglesToNetwork, LidarRoadEvidence, TagRoadPoints, RegisterRoadMap,
+                  CurbAttractorMap)
 """The algorithms whose one class runs in both modes (:class:`.algorithms.base.JobAlgorithm`):
 given the executable, through ``gisroads job``."""

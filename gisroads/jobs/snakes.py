@@ -21,7 +21,7 @@ from .common import _map_lines, _warn_if_no_road, network_summary, stage_default
 def attractor_job(cloud_path, map_source, out_path, *,
                   curb_detector: str = stage_default(curb_attractor, "curb_detector"),
                   cell_m: float = stage_default(curb_attractor, "cell_m"),
-                  snap_m: float | None = None, progress: Progress = None) -> dict:
+                  snap_m: float = SNAP_M, progress: Progress = None) -> dict:
     """Curb attractor map of the road patches of a map over a cloud (Boyko & Funkhouser,
     section 2.3), as a GeoTIFF in the cloud's CRS. ``map_source`` as in
     :func:`snakes_job`; the parameters as in :func:`gisroads.snakes.pipeline.curb_attractor`.

@@ -2,18 +2,15 @@
 from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination)
 
-from gisroads.jobs import attractor_job, stage_default
-from gisroads.snakes.registration import SNAP_M
-
-from ..convert import gisroads_errors, progress_callback, source_to_frame
-from .base import GisroadsAlgorithm, cloud_input, road_map_input
+from .base import JobAlgorithm, cloud_input, road_map_input
 
 DETECTORS = ("exp", "step", "none")
 
 
-def map_guided_parameters(tr, cell_help: str) -> list:
+def map_guided_parameters(tr, cell_help: str, *, cell_m: float, snap_m: float) -> list:
     """The inputs both map-guided algorithms share: cloud, map, curb detector, cell and
-    intersection snapping, as ``(parameter, help)`` pairs."""
+    intersection snapping (defaults ``cell_m`` and ``snap_m``, metres), as ``(parameter,
+    help)`` pairs."""
     return [
         (cloud_input(tr, "the cloud; read chunk by chunk, only along the map"), None),
         (road_map_input(tr), None),
@@ -23,32 +20,21 @@ def map_guided_parameters(tr, cell_help: str) -> list:
                                     defaultValue=0),
          "how the height step of a neighbourhood weights its normal's tilt"),
         (QgsProcessingParameterNumber("CELL", tr("Attractor cell (metres)"),
-                                      QgsProcessingParameterNumber.Double,
-                                      stage_default(attractor_job, "cell_m"),
+                                      QgsProcessingParameterNumber.Double, cell_m,
                                       minValue=0.1, maxValue=5.0), cell_help),
         (QgsProcessingParameterNumber("SNAP", tr("Intersection snapping (metres)"),
-                                      QgsProcessingParameterNumber.Double, SNAP_M,
+                                      QgsProcessingParameterNumber.Double, snap_m,
                                       minValue=0.01, maxValue=50.0),
          "map line ends closer than this are one intersection"),
     ]
 
 
-def map_guided_arguments(algorithm, parameters, context, feedback) -> tuple:
-    """``(cloud path, map lines, options)`` from the ``map_guided_parameters``; options are
-    the jobs' ``curb_detector``, ``cell_m`` and ``snap_m``."""
-    lines = source_to_frame(algorithm.parameterAsSource(parameters, "MAP", context), feedback)
-    options = {
-        "curb_detector": DETECTORS[algorithm.parameterAsEnum(parameters, "DETECTOR", context)],
-        "cell_m": algorithm.parameterAsDouble(parameters, "CELL", context),
-        "snap_m": algorithm.parameterAsDouble(parameters, "SNAP", context)}
-    return algorithm.parameterAsFile(parameters, "INPUT", context), lines, options
-
-
-class CurbAttractorMap(GisroadsAlgorithm):
+class CurbAttractorMap(JobAlgorithm):
     NAME = "curbattractormap"
     DISPLAY_NAME = "Curb attractor map"
     GROUP = "Map-guided snakes"
     STAGE = 2
+    JOB = "attractor_job"
     HELP = (
         "<p>Builds the attractor map of Boyko &amp; Funkhouser's map-guided road extraction "
         "(section 2.3) along an approximate road map over a LAS/LAZ point cloud: the map is "
@@ -66,7 +52,9 @@ class CurbAttractorMap(GisroadsAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         params = map_guided_parameters(self.tr,
-                                       "cell of the attractor map; c is averaged per cell") + [
+                                       "cell of the attractor map; c is averaged per cell",
+                                       cell_m=self.default("cell_m"),
+                                       snap_m=self.default("snap_m")) + [
             (QgsProcessingParameterRasterDestination("OUTPUT", self.tr("Attractor map")),
              "GeoTIFF of a = 0.2 e + c in the cloud's CRS"),
         ]
@@ -74,7 +62,10 @@ class CurbAttractorMap(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
-        cloud, lines, options = map_guided_arguments(self, parameters, context, feedback)
-        with gisroads_errors():
-            attractor_job(cloud, lines, out, progress=progress_callback(feedback), **options)
+        self.run_job(dict(
+            cloud_path=self.parameterAsFile(parameters, "INPUT", context),
+            map_source=self.source_path(parameters, "MAP", context, feedback), out_path=out,
+            curb_detector=DETECTORS[self.parameterAsEnum(parameters, "DETECTOR", context)],
+            cell_m=self.parameterAsDouble(parameters, "CELL", context),
+            snap_m=self.parameterAsDouble(parameters, "SNAP", context)), feedback)
         return {"OUTPUT": out}

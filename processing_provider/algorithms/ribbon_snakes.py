@@ -4,13 +4,25 @@ from pathlib import Path
 from qgis.core import (QgsProcessingParameterFileDestination,
                        QgsProcessingParameterRasterDestination)
 
-from gisroads.jobs import snakes_job
+from gisroads.jobs import snakes_job, stage_default
 from gisroads.parallel import default_workers
+from gisroads.snakes.registration import SNAP_M
 
-from ..convert import gisroads_errors, progress_callback
+from ..convert import gisroads_errors, progress_callback, source_to_frame
 from ..loading import load_geopackage_on_completion
 from .base import GisroadsAlgorithm, network_output, workers_parameter
-from .curb_attractor import map_guided_arguments, map_guided_parameters
+from .curb_attractor import DETECTORS, map_guided_parameters
+
+
+def map_guided_arguments(algorithm, parameters, context, feedback) -> tuple:
+    """``(cloud path, map lines, options)`` from the ``map_guided_parameters``; options are
+    the jobs' ``curb_detector``, ``cell_m`` and ``snap_m``."""
+    lines = source_to_frame(algorithm.parameterAsSource(parameters, "MAP", context), feedback)
+    options = {
+        "curb_detector": DETECTORS[algorithm.parameterAsEnum(parameters, "DETECTOR", context)],
+        "cell_m": algorithm.parameterAsDouble(parameters, "CELL", context),
+        "snap_m": algorithm.parameterAsDouble(parameters, "SNAP", context)}
+    return algorithm.parameterAsFile(parameters, "INPUT", context), lines, options
 
 
 class RibbonSnakeRoads(GisroadsAlgorithm):
@@ -33,8 +45,9 @@ class RibbonSnakeRoads(GisroadsAlgorithm):
         "their own level, classified 11, and the attractor map as a GeoTIFF.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        params = map_guided_parameters(self.tr,
-                                       "cell of the attractor map the snakes fit to") + [
+        params = map_guided_parameters(self.tr, "cell of the attractor map the snakes fit to",
+                                       cell_m=stage_default(snakes_job, "cell_m"),
+                                       snap_m=SNAP_M) + [
             (network_output(self.tr, "GeoPackage receiving every layer, in the cloud's CRS"),
              None),
             (QgsProcessingParameterFileDestination("TAGGED_LAS",

@@ -182,3 +182,13 @@ def test_register_map_of_fusa_both_ways(both_ways, lidar_dir, tmp_path):
     a = gpd.read_file(here / "registered.gpkg", layer="registered_map")
     b = gpd.read_file(there / "registered.gpkg", layer="registered_map")
     assert a.geometry.equals(b.geometry)
+
+
+def test_curb_attractor_of_fusa_both_ways(both_ways, lidar_dir, tmp_path):
+    truth = str(lidar_dir / "ground_truth" / "fusa" / "centrelines.geojson")
+    runs = both_ways("curbattractormap", {"INPUT": str(lidar_dir / "fusa.laz"), "MAP": truth,
+                                          "OUTPUT": tmp_path / "attractor.tif"}, tmp_path)
+    (_, here), (_, there) = runs["in-process"], runs["external"]
+    ours = read_raster(here / "attractor.tif").data
+    np.testing.assert_array_equal(ours, read_raster(there / "attractor.tif").data)
+    assert np.nanmax(ours) > 0.5     # kerbs over the 0.2 extent plateau
