@@ -26,7 +26,7 @@ from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutpu
                        QgsProcessingProvider)
 
 from .algorithms.base import (add_scene_parameters, background_output, city_blocks_parameters,
-                              train_parameters, workers_parameter)
+                              lidar_model_input, train_parameters, workers_parameter)
 from .algorithms.curb_attractor import CurbAttractorMap
 from .algorithms.lidar_evidence import LidarRoadEvidence
 from .algorithms.lidar_ground_intensity import LidarGroundIntensity
@@ -154,14 +154,17 @@ class ExternalLidarRoadNetwork(_ExternalRoadNetwork):
              "evidence (default): the road likelihood of every cue the cloud carries (the "
              "paper's intensity among them), through the network stage; intensity: the "
              "paper's rectangles on the ground intensity alone"),
+            (lidar_model_input(str), None),
             (workers_parameter(str, "tiles"), None),
             (background_output(str), None),
         ]
 
     def arguments(self, parameters, context, feedback):
         background = self.parameterAsFileOutput(parameters, "BACKGROUND", context)
+        model = self.parameterAsFile(parameters, "MODEL", context)
         return (self.parameterAsFile(parameters, "INPUT", context),
                 ["--cue", self.CUES[self.parameterAsEnum(parameters, "CUE", context)],
+                 *(["--model", model] if model else []),
                  "--workers", str(self.parameterAsInt(parameters, "WORKERS", context)),
                  *(["--background", background] if background else [])])
 

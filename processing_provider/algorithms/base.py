@@ -189,6 +189,17 @@ def workers_parameter(tr, what: str) -> QgsProcessingParameterNumber:
     return param
 
 
+def lidar_model_input(tr) -> QgsProcessingParameterFile:
+    """The optional parameter ``MODEL`` of a LiDAR road network: a road model of the area
+    learned from its road layer (``gisroads train CLOUD ROADS -o model.npz``)."""
+    param = QgsProcessingParameterFile("MODEL", tr("Road model of the area (.npz)"),
+                                       fileFilter="Road model (*.npz)", optional=True)
+    param.setHelp(tr("optional: boosted trees learned from the area's road layer with "
+                     "'gisroads train CLOUD ROADS -o model.npz' (the road-database update); "
+                     "they replace the evidence cue's rule (the evidence cue only)"))
+    return param
+
+
 def network_output(tr, text: str) -> QgsProcessingParameterFileDestination:
     """The road-network GeoPackage parameter ``OUTPUT``."""
     param = QgsProcessingParameterFileDestination("OUTPUT", tr("Road network"),

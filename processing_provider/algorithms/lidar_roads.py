@@ -12,8 +12,8 @@ from gisroads.parallel import default_workers
 
 from ..convert import gisroads_errors, progress_callback
 from ..loading import load_beneath_on_completion, load_geopackage_on_completion
-from .base import (GisroadsAlgorithm, background_output, cloud_input, network_output,
-                   workers_parameter)
+from .base import (GisroadsAlgorithm, background_output, cloud_input, lidar_model_input,
+                   network_output, workers_parameter)
 
 
 class LidarRoadNetwork(GisroadsAlgorithm):
@@ -57,6 +57,7 @@ class LidarRoadNetwork(GisroadsAlgorithm):
             (QgsProcessingParameterNumber("THRESHOLD", self.tr("Evidence threshold"), double,
                                           EVIDENCE_THRESHOLD, minValue=0.0, maxValue=1.0),
              "evidence cue only: road likelihood at which a cell is road"),
+            (lidar_model_input(self.tr), None),
             (QgsProcessingParameterNumber("CELL", self.tr("Intensity image cell (metres)"),
                                           double, None, optional=True, minValue=0.1,
                                           maxValue=5.0),
@@ -103,6 +104,7 @@ class LidarRoadNetwork(GisroadsAlgorithm):
                 cloud, out, tagged_las=tagged, rasters_dir=rasters, background=background,
                 progress=progress_callback(feedback),
                 cue=CUES[self.parameterAsEnum(parameters, "CUE", context)],
+                model=self.parameterAsFile(parameters, "MODEL", context) or None,
                 threshold=self.parameterAsDouble(parameters, "THRESHOLD", context),
                 cell_m=(self.parameterAsDouble(parameters, "CELL", context)
                         if parameters.get("CELL") not in (None, "") else None),

@@ -192,3 +192,32 @@ def test_curb_attractor_of_fusa_both_ways(both_ways, lidar_dir, tmp_path):
     ours = read_raster(here / "attractor.tif").data
     np.testing.assert_array_equal(ours, read_raster(there / "attractor.tif").data)
     assert np.nanmax(ours) > 0.5     # kerbs over the 0.2 extent plateau
+
+
+def test_lidar_road_network_with_a_model_of_the_area_both_ways(run_algorithm, lidar_dir,
+                                                              tmp_path):
+    """*LiDAR road network* takes a model learned from the area's road layer (issue 25
+    item 5), in-process and through 'gisroads lidar --model'."""
+    from qgis.core import QgsProcessingContext, QgsProcessingFeedback
+
+    from gisroads.lidar.learned import save_evidence_model
+    from gisroads.lidar.pipeline import train_evidence_model
+    from processing_provider.external import ExternalLidarRoadNetwork
+
+    truth = gpd.read_file(lidar_dir / "ground_truth" / "fusa" / "centrelines.geojson")
+    model = save_evidence_model(train_evidence_model(lidar_dir / "fusa.laz", truth,
+                                                     width_field="width_m"),
+                                tmp_path / "fusa_model.npz")
+    params = {"INPUT": str(lidar_dir / "fusa.laz"), "MODEL": str(model), "WORKERS": 1}
+    ours = run_algorithm("lidarroadnetwork", {**params, "OUTPUT": str(tmp_path / "a.gpkg")})
+    external = ExternalLidarRoadNetwork(_external_gisroads())
+    external.initAlgorithm()
+    these = {**params, "OUTPUT": str(tmp_path / "b.gpkg")}
+    context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
+    assert external.prepare(these, context, feedback)
+    theirs = external.runPrepared(these, context, feedback)
+    assert ours["ROADS"] == theirs["ROADS"] > 5
+    assert ours["LENGTH_M"] == pytest.approx(theirs["LENGTH_M"], rel=1e-9)
+    for name in ("a.gpkg", "b.gpkg"):
+        lines = gpd.read_file(tmp_path / name, layer="road_centrelines")
+        assert "model" in lines.cues.iloc[0].split(",")
