@@ -25,6 +25,7 @@ MODULES = [
     "gisroads.lidar.pipeline",
     "gisroads.network.rasters",
     "gisroads.snakes.pipeline",
+    "gisroads.synthetic.canal",
     "gisroads.synthetic.cloud",
     "gisroads.synthetic.image",
     "gisroads.synthetic.network",

@@ -11,8 +11,10 @@ Heights carry a ``Z_NOISE_M`` Gaussian noise.
 Intensity is the surface's reflectance at 1064 nm times ``INTENSITY_SCALE`` (65535: the
 16-bit scale LAS 1.4 asks for), with 8 % multiplicative and 0.01 additive noise; a pulse
 split in two returns shares its energy 60/40 between them. Reflectances: asphalt 0.12,
-parking asphalt 0.09, concrete 0.30, paint 0.60, grass 0.45, foliage 0.45, rock 0.25, roofs
-0.15-0.50 and cars 0.08-0.58 (per object).
+parking asphalt 0.09, concrete 0.30, brick pavers 0.30 (as bright as the concrete
+footways), paint 0.60, grass 0.45, foliage 0.45, rock 0.25, roofs 0.15-0.50 and cars
+0.08-0.58 (per object). Open water returns nothing (specular at 1064 nm): a pulse whose
+first surface is water is lost.
 
 Classes (ASPRS): 2 ground (every ground surface, roads and sidewalks included, and bridge
 ramps, which stand on embankments), 17 bridge deck, 6 building, 5 high vegetation, 1 cars
@@ -46,6 +48,7 @@ REFLECTANCE = {
     Material.ASPHALT: (0.12, 0.12), Material.DARK_ASPHALT: (0.09, 0.09),
     Material.PAINT: (0.60, 0.60), Material.ROCK: (0.25, 0.25),
     Material.ROOF: (0.15, 0.50), Material.CAR: (0.08, 0.58), Material.FOLIAGE: (0.45, 0.45),
+    Material.PAVERS: (0.30, 0.30), Material.WATER: (0.0, 0.0),
 }
 _LOW = np.array([REFLECTANCE[m][0] for m in Material])
 _SPAN = np.array([REFLECTANCE[m][1] - REFLECTANCE[m][0] for m in Material])
@@ -142,8 +145,14 @@ def render_cloud(scene: Scene, *, density_per_m2: float = 10.0, seed: int = 0,
                                                 shape)
         row = np.minimum(((y1 - y) / pixel).astype(np.intp), shape[0] - 1)
         col = np.minimum(((x - x0) / pixel).astype(np.intp), shape[1] - 1)
-        surfaces = describe_surfaces(scene, x, y, ground_id[row, col], over_id[row, col])
-        yield _returns(rng, surfaces, x, y, scene.crs)
+        ground_id, over_id = ground_id[row, col], over_id[row, col]
+        surfaces = describe_surfaces(scene, x, y, ground_id, over_id)
+        dry = surfaces.top_material != Material.WATER
+        if not dry.all():
+            x, y, ground_id, over_id = x[dry], y[dry], ground_id[dry], over_id[dry]
+            surfaces = describe_surfaces(scene, x, y, ground_id, over_id)
+        if len(x):
+            yield _returns(rng, surfaces, x, y, scene.crs)
 
 
 def write_cloud(scene: Scene, path, *, density_per_m2: float = 10.0, seed: int = 0,

@@ -41,6 +41,8 @@ PALETTES = {
     Material.CAR: [(200, 200, 205, 200), (30, 30, 34, 34), (150, 25, 25, 70),
                    (40, 60, 130, 62), (140, 142, 148, 146), (210, 180, 60, 170)],
     Material.FOLIAGE: [(44, 82, 38, 172), (52, 92, 40, 184), (38, 70, 34, 160)],
+    Material.PAVERS: [(150, 128, 118, 150)],
+    Material.WATER: [(46, 62, 66, 20)],
 }
 _COUNT = np.array([len(PALETTES[m]) for m in Material])
 _PALETTE = np.zeros((len(Material), _COUNT.max(), 4))

@@ -84,6 +84,8 @@ class Material(IntEnum):
     ROOF = 6
     CAR = 7
     FOLIAGE = 8
+    PAVERS = 9
+    WATER = 10
 
 
 class Kind(IntEnum):
@@ -158,12 +160,14 @@ class Relief:
     waves : tuple of (amplitude_m, kx, ky, phase)
         Terrain undulation (wave numbers in radians per metre).
     kerb_waves : tuple of (kx, ky, phase)
-        Two waves whose mean sets the kerb height within ``KERB_RANGE_M``.
+        Two waves whose mean sets the kerb height within ``kerb_range_m``.
     cliff_point, cliff_normal : (x, y)
         A point on the mid-slope line of the cliff, and its unit normal towards the plateau.
     cliff_height_m, cliff_slope_m : float
         Rise of the plateau and horizontal width of its slope (0 height: no cliff).
     ramps : tuple of Ramp
+    kerb_range_m : (low, high)
+        Range of the kerb height, metres.
     """
 
     origin: tuple[float, float]
@@ -174,6 +178,7 @@ class Relief:
     cliff_height_m: float
     cliff_slope_m: float
     ramps: tuple = ()
+    kerb_range_m: tuple[float, float] = KERB_RANGE_M
 
     def cliff_distance(self, x, y):
         """Signed distance (metres) from the cliff's mid-slope line, positive on the plateau."""
@@ -194,11 +199,11 @@ class Relief:
         return z
 
     def kerb_m(self, x, y):
-        """Height of unpaved ground above the paved level (metres), in ``KERB_RANGE_M``."""
+        """Height of unpaved ground above the paved level (metres), in ``kerb_range_m``."""
         u = np.asarray(x, float) - self.origin[0]
         v = np.asarray(y, float) - self.origin[1]
         mean = sum(_sin(kx * u + ky * v + phase) for kx, ky, phase in self.kerb_waves)
-        low, high = KERB_RANGE_M
+        low, high = self.kerb_range_m
         return (low + high) / 2 + (high - low) / 2 * mean / len(self.kerb_waves)
 
     def road_z(self, x, y, road_id: int):
@@ -234,7 +239,8 @@ def _stable_seed(seed: int, name: str) -> np.random.Generator:
     return np.random.default_rng([int(seed), zlib.crc32(name.encode())])
 
 
-def _make_relief(seed, origin, *, cliff_line, cliff_height_m, cliff_slope_m, ramps) -> Relief:
+def _make_relief(seed, origin, *, cliff_line, cliff_height_m, cliff_slope_m, ramps,
+                 kerb_range_m=KERB_RANGE_M) -> Relief:
     rng = _stable_seed(seed, "relief")
     waves = []
     for amplitude, wavelength in ((1.2, (700, 1100)), (0.7, (350, 600)), (0.35, (200, 350))):
@@ -254,7 +260,7 @@ def _make_relief(seed, origin, *, cliff_line, cliff_height_m, cliff_slope_m, ram
                   kerb_waves=tuple(kerb_waves), cliff_point=(float(x0), float(y0)),
                   cliff_normal=(float(normal[0]), float(normal[1])),
                   cliff_height_m=float(cliff_height_m), cliff_slope_m=float(cliff_slope_m),
-                  ramps=tuple(ramps))
+                  ramps=tuple(ramps), kerb_range_m=tuple(map(float, kerb_range_m)))
 
 
 # ---------------------------------------------------------------------------------------
@@ -271,6 +277,7 @@ class _Road:
     sidewalk: bool = True
     street_trees: bool = False
     kerb_parking: bool = False
+    surface: str = "asphalt"
 
     @property
     def line(self):
@@ -826,7 +833,8 @@ class Scene:
     roads : GeoDataFrame
         LineString Z centre lines (vertices at most ``VERTEX_SPACING_M`` apart, Z = road
         surface elevation); ``road_id, name, kind ('road'), width_m, level (0 ground, 1 on a
-        bridge), bridge (bool), z_min, z_max``.
+        bridge), bridge (bool), sidewalk (bool), surface ('asphalt', 'pavers'), z_min,
+        z_max``.
     parking_lots, parking_access : GeoDataFrame
         Lot polygons (``lot_id, aspect``) and the short access joining each to its road;
         neither is part of the road truth.
@@ -848,6 +856,8 @@ class Scene:
     crs : pyproj.CRS
     seed : int
     relief : Relief
+    water : GeoDataFrame, optional
+        Open water polygons (canals); a LiDAR pulse on water gives no return.
     """
 
     roads: gpd.GeoDataFrame
@@ -863,18 +873,27 @@ class Scene:
     crs: CRS
     seed: int
     relief: Relief
+    water: gpd.GeoDataFrame | None = None
+
+    def __post_init__(self):
+        if self.water is None:
+            self.water = _gdf({}, [], self.crs)
 
     def object_layers(self) -> dict[str, gpd.GeoDataFrame]:
         """The scene's layers besides the road truth, by name, ready for a GeoPackage.
 
         ``roads`` (the centre lines with their name, level and bridge flag),
         ``truth_edges``, ``parking_lots``, ``parking_access``, ``buildings``, ``trees``,
-        ``cars``, ``markings``, ``bridges``, ``cliff``.
+        ``cars``, ``markings``, ``bridges``, ``cliff``, and ``water`` where the scene has
+        some.
         """
-        return {"roads": self.roads, "truth_edges": self.truth_edges,
-                "parking_lots": self.parking_lots, "parking_access": self.parking_access,
-                "buildings": self.buildings, "trees": self.trees, "cars": self.cars,
-                "markings": self.markings, "bridges": self.bridges, "cliff": self.cliff}
+        layers = {"roads": self.roads, "truth_edges": self.truth_edges,
+                  "parking_lots": self.parking_lots, "parking_access": self.parking_access,
+                  "buildings": self.buildings, "trees": self.trees, "cars": self.cars,
+                  "markings": self.markings, "bridges": self.bridges, "cliff": self.cliff}
+        if len(self.water):
+            layers["water"] = self.water
+        return layers
 
     @cached_property
     def truth_edges(self) -> gpd.GeoDataFrame:
@@ -957,8 +976,9 @@ class Scene:
         width = roads["width_m"].to_numpy()
         sidewalk = roads["sidewalk"].to_numpy()
         polygons = self.truth.polygons
-        grade = polygons.geometry.values[
-            ~polygons["road_id"].isin(roads.loc[roads["bridge"], "road_id"]).to_numpy()]
+        on_grade = ~polygons["road_id"].isin(roads.loc[roads["bridge"], "road_id"]).to_numpy()
+        pavers = polygons["road_id"].isin(
+            roads.loc[roads["surface"] == "pavers", "road_id"]).to_numpy()
         ramp_groups = [([area], dict(material=Material.ASPHALT, base=Base.RAMP, ramp=i))
                        for i, area in enumerate(self.areas.ramps)]
         cliff = []
@@ -975,7 +995,11 @@ class Scene:
                                                      base=Base.PAVED)),
             (self.parking_access.geometry.values, dict(material=Material.DARK_ASPHALT,
                                                        base=Base.PAVED)),
-            (grade, dict(material=Material.ASPHALT, base=Base.PAVED)),
+            (self.water.geometry.values, dict(material=Material.WATER, base=Base.RAISED)),
+            (polygons.geometry.values[on_grade & ~pavers],
+             dict(material=Material.ASPHALT, base=Base.PAVED)),
+            (polygons.geometry.values[on_grade & pavers],
+             dict(material=Material.PAVERS, base=Base.PAVED)),
             *ramp_groups,
             (self.markings.geometry.values, dict(material=Material.PAINT, base=Base.PAVED)),
             (self.buildings.geometry.values, dict(
@@ -1356,6 +1380,20 @@ def _cars(rng, roads, lines, zones, lots, keep_out):
     return cars[keep], rng.uniform(1.4, 1.6, n)[keep], rng.random(n)[keep], where[keep]
 
 
+def scene_frame(size_m, origin, crs) -> tuple[tuple, CRS]:
+    """The extent ``(xmin, ymin, xmax, ymax)`` and CRS of a scene, checked: at least
+    :data:`MIN_SIZE_M` a side, a projected CRS in metres."""
+    width, height = map(float, size_m)
+    if min(width, height) < MIN_SIZE_M:
+        raise GisroadsError(f"a scene needs at least {MIN_SIZE_M:.0f} x {MIN_SIZE_M:.0f} m, "
+                            f"got {width} x {height}")
+    crs = CRS.from_user_input(crs)
+    if not crs.is_projected or crs.axis_info[0].unit_name not in ("metre", "meter"):
+        raise GisroadsError(f"scenes are laid out in metres; {crs.name} is not a metre CRS")
+    xmin, ymin = map(float, origin)
+    return (xmin, ymin, xmin + width, ymin + height), crs
+
+
 def make_scene(*, seed: int = 0, size_m: tuple[float, float] = (400.0, 400.0),
                origin: tuple[float, float] = (500000.0, 4500000.0), crs="EPSG:32633",
                features=FEATURES) -> Scene:
@@ -1396,18 +1434,12 @@ def make_scene(*, seed: int = 0, size_m: tuple[float, float] = (400.0, 400.0),
     >>> make_scene(seed=0, size_m=(300, 300), features=()).buildings.empty
     True
     """
-    width, height = map(float, size_m)
-    if min(width, height) < MIN_SIZE_M:
-        raise GisroadsError(f"a scene needs at least {MIN_SIZE_M:.0f} x {MIN_SIZE_M:.0f} m, "
-                            f"got {width} x {height}")
     unknown = set(features) - set(FEATURES)
     if unknown:
         raise GisroadsError(f"unknown features {sorted(unknown)}; choose from {FEATURES}")
-    crs = CRS.from_user_input(crs)
-    if not crs.is_projected or crs.axis_info[0].unit_name not in ("metre", "meter"):
-        raise GisroadsError(f"scenes are laid out in metres; {crs.name} is not a metre CRS")
-    xmin, ymin = map(float, origin)
-    extent = (xmin, ymin, xmin + width, ymin + height)
+    extent, crs = scene_frame(size_m, origin, crs)
+    xmin, ymin, xmax, ymax = extent
+    width, height = xmax - xmin, ymax - ymin
 
     roads, frame = _layout_roads(seed, (xmin, ymin), (width, height), features)
     _node_same_level(roads)
@@ -1468,24 +1500,7 @@ def make_scene(*, seed: int = 0, size_m: tuple[float, float] = (400.0, 400.0),
     car_centre = shapely.get_coordinates(shapely.centroid(car_geoms)).reshape(-1, 2)
     car_roof = relief.terrain_z(car_centre[:, 0], car_centre[:, 1]) + car_h
 
-    # Truth centre lines: densified, with the road surface elevation as Z.
-    dense = shapely.segmentize(lines, VERTEX_SPACING_M)
-    geoms3d, z_min, z_max = [], [], []
-    for i, line in enumerate(dense):
-        xy = shapely.get_coordinates(line)
-        z = relief.road_z(xy[:, 0], xy[:, 1], i)
-        geoms3d.append(shapely.linestrings(np.column_stack([xy, z])))
-        z_min.append(z.min())
-        z_max.append(z.max())
-    road_frame = _gdf({
-        "road_id": np.arange(len(roads), dtype=np.int64),
-        "name": np.array([r.name for r in roads], dtype=object),
-        "kind": np.full(len(roads), "road", dtype=object),
-        "width_m": widths, "level": np.array([r.level for r in roads], np.int64),
-        "bridge": np.array([r.bridge for r in roads]),
-        "sidewalk": np.array([r.sidewalk for r in roads]),
-        "z_min": np.array(z_min), "z_max": np.array(z_max)}, geoms3d, crs)
-
+    road_frame = _road_frame(roads, relief, crs)
     lot_frame = _gdf({"lot_id": np.arange(len(lots), dtype=np.int64),
                       "aspect": np.array([_aspect(g) for g in lot_geoms])}, lot_geoms, crs)
     access_frame = _gdf({"lot_id": np.arange(len(lots), dtype=np.int64)}, access_geoms, crs)
@@ -1514,6 +1529,30 @@ def make_scene(*, seed: int = 0, size_m: tuple[float, float] = (400.0, 400.0),
                       [r[2] for r in marking_rows], crs),
         cliff=cliff_frame, bridges=bridge_frame, extent=extent, crs=crs, seed=int(seed),
         relief=relief)
+
+
+def _road_frame(roads: list[_Road], relief: Relief, crs) -> gpd.GeoDataFrame:
+    """The truth centre lines (:attr:`Scene.roads`): densified, with the road surface
+    elevation as Z."""
+    dense = shapely.segmentize(np.array([r.line for r in roads], dtype=object),
+                               VERTEX_SPACING_M)
+    geoms3d, z_min, z_max = [], [], []
+    for i, line in enumerate(dense):
+        xy = shapely.get_coordinates(line)
+        z = relief.road_z(xy[:, 0], xy[:, 1], i)
+        geoms3d.append(shapely.linestrings(np.column_stack([xy, z])))
+        z_min.append(z.min())
+        z_max.append(z.max())
+    return _gdf({
+        "road_id": np.arange(len(roads), dtype=np.int64),
+        "name": np.array([r.name for r in roads], dtype=object),
+        "kind": np.full(len(roads), "road", dtype=object),
+        "width_m": np.array([r.width_m for r in roads]),
+        "level": np.array([r.level for r in roads], np.int64),
+        "bridge": np.array([r.bridge for r in roads]),
+        "sidewalk": np.array([r.sidewalk for r in roads]),
+        "surface": np.array([r.surface for r in roads], dtype=object),
+        "z_min": np.array(z_min), "z_max": np.array(z_max)}, geoms3d, crs)
 
 
 def _aspect(polygon) -> float:
