@@ -118,7 +118,7 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
             heights = (roads.mosaic("heights") if roads.tiles
                        else ground_level_heights(read_las(cloud_path)))
             result["tagged_points"] = tag_road_points(cloud_path, tagged_las,
-                                                      network.polygons.to_crs(working),
+                                                      _in_crs(network.polygons, working),
                                                       heights)
             result["tagged_las"] = Path(tagged_las)
         if background is not None or quicklook is not None:
@@ -138,19 +138,24 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
                   else network.qa["gap_edges"].query("selected"))
             service = network.qa.get(SERVICE_CENTRELINES)
             write_quicklook(quicklook, [
-                (qa.to_crs(working), dict(facecolor="none", edgecolor="cyan", linewidth=0.6)
+                (_in_crs(qa, working), dict(facecolor="none", edgecolor="cyan", linewidth=0.6)
                  if roads.cue == "intensity" else dict(color="cyan", linewidth=2)),
-                *([] if service is None else [(service.to_crs(working), dict(
+                *([] if service is None else [(_in_crs(service, working), dict(
                     color="#fdae61", linewidth=1.5, linestyle="--", label="service ways"))]),
-                (network.centrelines.to_crs(working),
+                (_in_crs(network.centrelines, working),
                  dict(color="red", linewidth=1.5, label="road centre lines")),
-                (network.junctions.to_crs(working),
+                (_in_crs(network.junctions, working),
                  dict(color="yellow", markersize=20, label="junctions")),
             ], background=beneath,
                 title=f"{Path(str(cloud_path)).name}: roads over the {kind}")
             result["quicklook"] = Path(quicklook)
     report(progress, 1.0, "done")
     return result
+
+
+def _in_crs(frame, crs):
+    """``frame`` in ``crs``; as it is where either has no CRS (a cloud without one)."""
+    return frame if crs is None or frame.crs is None else frame.to_crs(crs)
 
 
 def _background(roads: TiledRoads, working) -> tuple[GeoRaster | None, str]:

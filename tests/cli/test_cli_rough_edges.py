@@ -95,6 +95,16 @@ def test_missing_output_folders_are_still_made(tmp_path):
     assert (tmp_path / "new" / "scene" / "truth.gpkg").exists()
 
 
+def test_a_quicklook_of_a_cloud_without_crs_is_drawn(lidar_dir, tmp_path):
+    # zurich.laz declares no CRS: the layers stay in its coordinates
+    result = gisroads("lidar", lidar_dir / "zurich.laz", "-o", tmp_path / "z.gpkg",
+                      "--quicklook", tmp_path / "z.png", "--json")
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    assert (tmp_path / "z.png").stat().st_size > 10_000
+    assert json.loads(result.stdout)["quicklook"].endswith("z.png")
+
+
 def test_info_prints_plain_numbers(lidar_dir):
     result = gisroads("info", lidar_dir / "autzen_trim.laz")
     assert result.returncode == 0, result.stderr
