@@ -28,6 +28,7 @@ from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutpu
 from .algorithms.base import (add_scene_parameters, background_output, city_blocks_parameters,
                               lidar_model_input, train_parameters, workers_parameter)
 from .algorithms.curb_attractor import CurbAttractorMap
+from .algorithms.evaluate_network import EvaluateRoadNetwork
 from .algorithms.lidar_evidence import LidarRoadEvidence
 from .algorithms.lidar_ground_intensity import LidarGroundIntensity
 from .algorithms.lidar_likelihood import LidarLikelihood
@@ -431,6 +432,6 @@ EXTERNAL_ALGORITHMS = (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork,
 
 JOB_ALGORITHMS = (LidarGroundIntensity, LidarSegmentation, LidarLikelihood, LidarMinCover,
                   RectanglesToNetwork, LidarRoadEvidence, TagRoadPoints, RegisterRoadMap,
-                  CurbAttractorMap)
+                  CurbAttractorMap, EvaluateRoadNetwork)
 """The algorithms whose one class runs in both modes (:class:`.algorithms.base.JobAlgorithm`):
 given the executable, through ``gisroads job``."""

@@ -138,11 +138,14 @@ def _named_layer(source) -> tuple[str, str | None]:
 
 def _layer(source, layer: str) -> gpd.GeoDataFrame:
     """A GeoDataFrame as given, or a file's layer: the one its source names
-    (``path|layername=...``), else ``layer`` when it has one, else its only layer."""
+    (``path|layername=...``), else a GeoPackage's ``layer`` when it has one, else the
+    file's only (first) layer."""
     if isinstance(source, gpd.GeoDataFrame):
         return source
     path, named = _named_layer(source)
-    if named is None and layer in list_layers(path):
+    if not Path(path).is_file():
+        raise MissingFileError(f"{path}: no such file")
+    if named is None and path.lower().endswith(".gpkg") and layer in list_layers(path):
         named = layer
     return read_layer(path, named)
 

@@ -8,12 +8,12 @@ import geopandas as gpd
 
 from ..errors import GisroadsError
 from ..evaluate import evaluate_network, match_layers
-from ..geo import POLYGONS
+from ..geo import CENTRELINES, JUNCTIONS, POLYGONS
 from ..io.raster import write_geotiff
 from ..io.vector import list_layers, read_layer, write_geopackage
 from ..progress import Progress, report, scaled
 from ..synthetic import make_scene, render_image, write_cloud
-from .common import stage_default
+from .common import _layer, _named_layer, stage_default
 
 
 def synth_job(out_dir, *, size_m: tuple[float, float] = stage_default(make_scene, "size_m"),
@@ -58,9 +58,11 @@ def synth_job(out_dir, *, size_m: tuple[float, float] = stage_default(make_scene
     return paths
 
 
-def _read_polygons(path) -> gpd.GeoDataFrame | None:
+def _read_polygons(source) -> gpd.GeoDataFrame | None:
+    """The road polygons beside a GeoPackage's centre lines, unless a layer was named."""
+    path, named = _named_layer(source)
     path = Path(path)
-    if path.suffix.lower() == ".gpkg" and POLYGONS in list_layers(path):
+    if named is None and path.suffix.lower() == ".gpkg" and POLYGONS in list_layers(path):
         return read_layer(path, POLYGONS)
     return None
 
@@ -87,15 +89,16 @@ def evaluate_job(extracted, reference, *,
         The figures of :func:`gisroads.evaluate.evaluate_network`.
     """
     report(progress, 0.0, "reading")
-    extracted_lines = read_layer(extracted)
-    reference_lines = read_layer(reference)
+    extracted_lines = _layer(extracted, CENTRELINES)
+    reference_lines = _layer(reference, CENTRELINES)
     if len(reference_lines) == 0:
         raise GisroadsError(f"{reference}: the reference holds no road")
-    predicted = (read_layer(extracted_polygons) if extracted_polygons
+    predicted = (_layer(extracted_polygons, POLYGONS) if extracted_polygons
                  else _read_polygons(extracted))
-    truth = read_layer(reference_polygons) if reference_polygons else _read_polygons(reference)
-    valid = read_layer(valid_area) if valid_area else None
-    junctions = read_layer(reference_junctions) if reference_junctions else None
+    truth = (_layer(reference_polygons, POLYGONS) if reference_polygons
+             else _read_polygons(reference))
+    valid = _layer(valid_area, None) if valid_area else None
+    junctions = _layer(reference_junctions, JUNCTIONS) if reference_junctions else None
     report(progress, 0.1, "scoring")
     results = evaluate_network(extracted_lines, reference_lines, buffer_m=buffer_m,
                                cell_m=cell_m, junction_radius_m=junction_radius_m,

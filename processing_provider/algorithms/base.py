@@ -4,13 +4,14 @@ import json
 import math
 import re
 
-from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutputFile,
+from qgis.core import (QgsFeatureSink, QgsProcessing, QgsProcessingAlgorithm,
+                       QgsProcessingException, QgsProcessingOutputFile,
                        QgsProcessingOutputNumber, QgsProcessingOutputRasterLayer,
                        QgsProcessingOutputVectorLayer, QgsProcessingParameterBoolean,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterFolderDestination, QgsProcessingParameterNumber,
-                       QgsProcessingParameterRasterLayer)
+                       QgsProcessingParameterRasterLayer, QgsVectorLayer)
 from qgis.PyQt.QtCore import QCoreApplication
 
 
@@ -116,6 +117,24 @@ class JobAlgorithm(GisroadsAlgorithm):
         path, layer = self.parameterAsCompatibleSourceLayerPathAndLayerName(
             parameters, name, context, ["gpkg"], "gpkg", feedback)
         return f"{path}|layername={layer}" if layer else path
+
+    def layer_to_sink(self, parameters, name: str, context, path: str, layer_name: str,
+                      feedback) -> str:
+        """Copy the layer ``layer_name`` of the GeoPackage a job wrote into the feature sink
+        parameter ``name`` (a file, a database table, a temporary layer: whatever the user
+        chose); returns its destination id."""
+        layer = QgsVectorLayer(f"{path}|layername={layer_name}", layer_name, "ogr")
+        if not layer.isValid():
+            raise QgsProcessingException(f"{path}: no layer {layer_name}")
+        sink, dest_id = self.parameterAsSink(parameters, name, context, layer.fields(),
+                                             layer.wkbType(), layer.crs())
+        if sink is None:
+            raise QgsProcessingException(self.invalidSinkError(parameters, name))
+        if not sink.addFeatures(layer.getFeatures(), QgsFeatureSink.FastInsert):
+            raise QgsProcessingException(f"{name}: {sink.lastError()}")
+        if feedback.isCanceled():
+            raise QgsProcessingException("cancelled")
+        return dest_id
 
     def run_job(self, arguments: dict, feedback) -> dict:
         """The job's result, as JSON gives it (paths as strings) in both modes."""

@@ -1,22 +1,23 @@
 """Evaluate road network: buffer, topology, path-length and area scores against a reference."""
-from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutputNumber,
-                       QgsProcessingOutputString, QgsProcessingParameterFeatureSink,
-                       QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber)
+import json
+import tempfile
+from pathlib import Path
 
-from gisroads.evaluate import evaluate_network, format_report, match_layers
-from gisroads.jobs import stage_default
-from gisroads.progress import to_json
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingOutputString,
+                       QgsProcessingParameterFeatureSink, QgsProcessingParameterFeatureSource,
+                       QgsProcessingParameterNumber)
 
-from ..convert import frame_to_sink, gisroads_errors, source_to_frame, style_on_load
-from .base import GisroadsAlgorithm
+from ..loading import ApplyStyle, on_load, style_path
+from .base import JobAlgorithm
 
 HEADLINE = {"COMPLETENESS": ("buffer", "completeness"), "CORRECTNESS": ("buffer", "correctness"),
             "QUALITY": ("buffer", "quality"), "RMS_M": ("buffer", "rms_m"),
             "APLS": ("apls", "apls")}
 
 
-class EvaluateRoadNetwork(GisroadsAlgorithm):
+class EvaluateRoadNetwork(JobAlgorithm):
     NAME = "evaluateroadnetwork"
+    JOB = "evaluate_job"
     DISPLAY_NAME = "Evaluate road network"
     GROUP = "Evaluation"
     HELP = (
@@ -47,10 +48,10 @@ class EvaluateRoadNetwork(GisroadsAlgorithm):
         double = QgsProcessingParameterNumber.Double
         self.addParameter(QgsProcessingParameterNumber(
             "BUFFER", self.tr("Buffer width (metres; about half a carriageway)"), double,
-            stage_default(evaluate_network, "buffer_m"), minValue=0.01))
+            self.default("buffer_m"), minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
             "JUNCTION_RADIUS", self.tr("Junction matching radius (metres)"), double,
-            stage_default(evaluate_network, "junction_radius_m"), minValue=0.01))
+            self.default("junction_radius_m"), minValue=0.01))
         self.addParameter(QgsProcessingParameterFeatureSource(
             "EXTRACTED_POLYGONS", self.tr("Extracted road polygons (for area scores)"),
             polygons, optional=True))
@@ -59,11 +60,13 @@ class EvaluateRoadNetwork(GisroadsAlgorithm):
             polygons, optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             "CELL", self.tr("Grid cell for area scores (metres)"),
-            QgsProcessingParameterNumber.Double, stage_default(evaluate_network, "cell_m"),
-            minValue=0.05))
+            QgsProcessingParameterNumber.Double, self.default("cell_m"), minValue=0.05))
         self.addParameter(QgsProcessingParameterFeatureSource(
             "VALID_AREA", self.tr("Valid area: score only inside these polygons"),
             polygons, optional=True))
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            "REFERENCE_JUNCTIONS", self.tr("Reference junctions (points)"),
+            [QgsProcessing.TypeVectorPoint], optional=True))
         self.addParameter(QgsProcessingParameterFeatureSink(
             "EXTRACTED_QA", self.tr("Extracted pieces (TP/FP)"), QgsProcessing.TypeVectorLine))
         self.addParameter(QgsProcessingParameterFeatureSink(
@@ -80,39 +83,49 @@ class EvaluateRoadNetwork(GisroadsAlgorithm):
                            ("REFERENCE_POLYGONS", "reference road area, optional"),
                            ("CELL", "cell size of the grid the areas are compared on"),
                            ("VALID_AREA", "e.g. the surveyed area; optional"),
+                           ("REFERENCE_JUNCTIONS", "digitised junctions of the reference; "
+                            "optional (default: the nodes its lines share)"),
                            ("EXTRACTED_QA", "extracted lines cut at the buffer, status TP/FP"),
                            ("REFERENCE_QA", "reference lines cut at the buffer, status TP/FN")):
             self.parameterDefinition(name).setHelp(self.tr(text))
 
-    def _frame(self, parameters, name, context, feedback):
-        source = self.parameterAsSource(parameters, name, context)
-        return None if source is None else source_to_frame(source, feedback)
+    def _path(self, parameters, name, context, feedback):
+        if self.parameterAsSource(parameters, name, context) is None:
+            return None
+        return self.source_path(parameters, name, context, feedback)
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        extracted = self._frame(parameters, "EXTRACTED", context, feedback)
-        reference = self._frame(parameters, "REFERENCE", context, feedback)
-        if extracted is None or reference is None:
-            raise QgsProcessingException(self.tr("both line layers are required"))
-        buffer_m = self.parameterAsDouble(parameters, "BUFFER", context)
-        valid = self._frame(parameters, "VALID_AREA", context, feedback)
-        feedback.setProgressText(self.tr("scoring"))
-        with gisroads_errors():
-            results = evaluate_network(
-                extracted, reference, buffer_m=buffer_m,
+        with tempfile.TemporaryDirectory(prefix="gisroads-evaluate-") as folder:
+            qa_path = str(Path(folder) / "qa.gpkg")
+            results = self.run_job(dict(
+                extracted=self._path(parameters, "EXTRACTED", context, feedback),
+                reference=self._path(parameters, "REFERENCE", context, feedback),
+                buffer_m=self.parameterAsDouble(parameters, "BUFFER", context),
                 cell_m=self.parameterAsDouble(parameters, "CELL", context),
-                junction_radius_m=self.parameterAsDouble(parameters, "JUNCTION_RADIUS", context),
-                valid_area=valid,
-                extracted_polygons=self._frame(parameters, "EXTRACTED_POLYGONS", context, feedback),
-                reference_polygons=self._frame(parameters, "REFERENCE_POLYGONS", context, feedback))
-            feedback.setProgress(70)
-            qa = match_layers(extracted, reference, buffer_m=buffer_m, valid_area=valid)
-        feedback.pushInfo(format_report(results))
-        outputs = {name: results[group][key] for name, (group, key) in HEADLINE.items()}
-        for param, layer in (("EXTRACTED_QA", "eval_extracted"),
-                             ("REFERENCE_QA", "eval_reference")):
-            outputs[param] = frame_to_sink(self, parameters, param, context, qa[layer],
-                                           "LineString", feedback)
-            style_on_load(context, outputs[param], layer)
-        outputs["REPORT"] = to_json(results)
+                junction_radius_m=self.parameterAsDouble(parameters, "JUNCTION_RADIUS",
+                                                         context),
+                extracted_polygons=self._path(parameters, "EXTRACTED_POLYGONS", context,
+                                              feedback),
+                reference_polygons=self._path(parameters, "REFERENCE_POLYGONS", context,
+                                              feedback),
+                valid_area=self._path(parameters, "VALID_AREA", context, feedback),
+                reference_junctions=self._path(parameters, "REFERENCE_JUNCTIONS", context,
+                                               feedback),
+                qa_path=qa_path), feedback)
+            outputs = {name: results[group][key] for name, (group, key) in HEADLINE.items()}
+            for param, layer in (("EXTRACTED_QA", "eval_extracted"),
+                                 ("REFERENCE_QA", "eval_reference")):
+                outputs[param] = self.layer_to_sink(parameters, param, context, qa_path,
+                                                    layer, feedback)
+                on_load(context, outputs[param], ApplyStyle(style_path(layer)))
+        feedback.pushInfo(self.tr(_summary(results)))
+        outputs["REPORT"] = json.dumps(results)
         feedback.setProgress(100)
         return outputs
+
+
+def _summary(results: dict) -> str:
+    buffer = results["buffer"]
+    return (f"completeness {buffer['completeness']:.3f}, correctness "
+            f"{buffer['correctness']:.3f}, quality {buffer['quality']:.3f}, RMS "
+            f"{buffer['rms_m']:.2f} m")

@@ -194,6 +194,33 @@ def test_curb_attractor_of_fusa_both_ways(both_ways, lidar_dir, tmp_path):
     assert np.nanmax(ours) > 0.5     # kerbs over the 0.2 extent plateau
 
 
+def test_evaluate_with_reference_junctions_both_ways(both_ways, lidar_dir, tmp_path):
+    """*Evaluate road network* fills its QA sinks from the job's GeoPackage in both modes
+    and takes the reference's digitised junctions."""
+    truth_dir = lidar_dir / "ground_truth" / "fusa"
+    truth = gpd.read_file(truth_dir / "centrelines.geojson")
+    shifted = truth.assign(geometry=truth.geometry.translate(2.0, 0.0))
+    shifted = shifted[shifted.index != 0]          # one road missed
+    shifted.to_file(tmp_path / "extracted.gpkg", layer="road_centrelines")
+    runs = both_ways("evaluateroadnetwork", {
+        "EXTRACTED": f"{tmp_path / 'extracted.gpkg'}|layername=road_centrelines",
+        "REFERENCE": str(truth_dir / "centrelines.geojson"),
+        "REFERENCE_JUNCTIONS": str(truth_dir / "junctions.geojson"), "BUFFER": 3.0,
+        "EXTRACTED_QA": tmp_path / "e.gpkg", "REFERENCE_QA": tmp_path / "r.gpkg"}, tmp_path)
+    (ours, here), (theirs, there) = runs["in-process"], runs["external"]
+    assert ours["CORRECTNESS"] == pytest.approx(1.0) == theirs["CORRECTNESS"]
+    assert 0.5 < ours["COMPLETENESS"] == theirs["COMPLETENESS"] < 1.0
+    report = json.loads(ours["REPORT"])
+    assert report == json.loads(theirs["REPORT"])
+    assert report["topology"]["junctions_reference"] == len(
+        gpd.read_file(truth_dir / "junctions.geojson"))
+    for name in ("e.gpkg", "r.gpkg"):
+        a, b = gpd.read_file(here / name), gpd.read_file(there / name)
+        assert len(a) == len(b) > 0 and a.length.sum() == pytest.approx(b.length.sum())
+    missed = gpd.read_file(here / "r.gpkg").query("status == 'FN'").length.sum()
+    assert missed == pytest.approx((1 - ours["COMPLETENESS"]) * truth.length.sum(), rel=0.02)
+
+
 def test_lidar_road_network_with_a_model_of_the_area_both_ways(run_algorithm, lidar_dir,
                                                               tmp_path):
     """*LiDAR road network* takes a model learned from the area's road layer (issue 25
