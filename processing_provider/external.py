@@ -38,6 +38,7 @@ from .algorithms.lidar_segmentation import LidarSegmentation
 from .algorithms.open_network import OpenRoadNetwork
 from .algorithms.register_map import RegisterRoadMap
 from .algorithms.tag_points import TagRoadPoints
+from .algorithms.train_lidar_model import TrainLidarRoadModel
 from .loading import (load_beneath_on_completion, load_geopackage_on_completion,
                       load_scene_on_completion)
 from .runner import external_defaults, run_external
@@ -432,6 +433,6 @@ EXTERNAL_ALGORITHMS = (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork,
 
 JOB_ALGORITHMS = (LidarGroundIntensity, LidarSegmentation, LidarLikelihood, LidarMinCover,
                   RectanglesToNetwork, LidarRoadEvidence, TagRoadPoints, RegisterRoadMap,
-                  CurbAttractorMap, EvaluateRoadNetwork)
+                  CurbAttractorMap, EvaluateRoadNetwork, TrainLidarRoadModel)
 """The algorithms whose one class runs in both modes (:class:`.algorithms.base.JobAlgorithm`):
 given the executable, through ``gisroads job``."""

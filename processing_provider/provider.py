@@ -29,6 +29,7 @@ from .algorithms.segment_grouping import SegmentGrouping
 from .algorithms.subgraph_linking import SubgraphLinking
 from .algorithms.synthetic_scene import SyntheticRoadScene
 from .algorithms.tag_points import TagRoadPoints
+from .algorithms.train_lidar_model import TrainLidarRoadModel
 from .algorithms.train_road_model import TrainRoadModel
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
@@ -36,7 +37,7 @@ MODELS_DIR = Path(__file__).resolve().parent / "models"
 ALGORITHMS: tuple[type[GisroadsAlgorithm], ...] = (
     # LiDAR (Zhu & Mordohai): the whole pipeline, its stages, the evidence cue, city blocks
     LidarRoadNetwork, LidarGroundIntensity, LidarSegmentation, LidarLikelihood, LidarMinCover,
-    RectanglesToNetwork, TagRoadPoints, LidarRoadEvidence, CityBlocks,
+    RectanglesToNetwork, TagRoadPoints, LidarRoadEvidence, CityBlocks, TrainLidarRoadModel,
     # imagery (Grote & Rottensteiner, with the learned cue): the pipeline and its stages
     ImageryRoadNetwork, ImageSegmentation, SegmentGrouping, RoadPartFiltering,
     SubgraphLinking, JunctionConstruction, TrainRoadModel,

@@ -213,9 +213,10 @@ def lidar_model_input(tr) -> QgsProcessingParameterFile:
     learned from its road layer (``gisroads train CLOUD ROADS -o model.npz``)."""
     param = QgsProcessingParameterFile("MODEL", tr("Road model of the area (.npz)"),
                                        fileFilter="Road model (*.npz)", optional=True)
-    param.setHelp(tr("optional: boosted trees learned from the area's road layer with "
-                     "'gisroads train CLOUD ROADS -o model.npz' (the road-database update); "
-                     "they replace the evidence cue's rule (the evidence cue only)"))
+    param.setHelp(tr("optional: boosted trees learned from the area's road layer by "
+                     "Train LiDAR road model (or 'gisroads train CLOUD ROADS -o "
+                     "model.npz'; the road-database update); they replace the evidence "
+                     "cue's rule (the evidence cue only)"))
     return param
 
 

@@ -221,6 +221,24 @@ def test_evaluate_with_reference_junctions_both_ways(both_ways, lidar_dir, tmp_p
     assert missed == pytest.approx((1 - ours["COMPLETENESS"]) * truth.length.sum(), rel=0.02)
 
 
+def test_train_lidar_road_model_of_fusa_both_ways(both_ways, lidar_dir, tmp_path):
+    """*Train LiDAR road model* (issue 25 item 5 in the toolbox) writes the same model in
+    both modes, one that *LiDAR road network* and gisroads read back."""
+    from gisroads.lidar.learned import load_evidence_model
+
+    truth = str(lidar_dir / "ground_truth" / "fusa" / "centrelines.geojson")
+    runs = both_ways("trainlidarroadmodel", {"INPUT": str(lidar_dir / "fusa.laz"),
+                                             "ROADS": truth, "WIDTH": 7.0,
+                                             "OUTPUT": tmp_path / "fusa_model.npz"}, tmp_path)
+    (ours, here), (theirs, there) = runs["in-process"], runs["external"]
+    for key in ("ROAD_CELLS", "OTHER_CELLS", "TREES"):
+        assert ours[key] == theirs[key] > 0, key
+    assert ours["OTHER_CELLS"] > ours["ROAD_CELLS"] > 5000
+    a = load_evidence_model(here / "fusa_model.npz")
+    b = load_evidence_model(there / "fusa_model.npz")
+    assert a.metadata["road_cells"] == b.metadata["road_cells"] == ours["ROAD_CELLS"]
+
+
 def test_lidar_road_network_with_a_model_of_the_area_both_ways(run_algorithm, lidar_dir,
                                                               tmp_path):
     """*LiDAR road network* takes a model learned from the area's road layer (issue 25
