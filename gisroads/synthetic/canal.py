@@ -7,7 +7,7 @@ the kerb, 8-12 cm, between the street and the footway on its building side.
 
 :func:`make_canal_scene` lays out canals running west-east (one per 150 m of height,
 14-22 m wide), a paver street of 5-6.5 m on each bank (the street runs to the quay edge,
-a 2 m footway a kerb higher on its other side, then row houses), and north-south paver
+a 2 m footway a kerb higher on its other side, then houses on lawns), and north-south paver
 streets of 5-7 m (footways on both sides) that cross the canals on bridges at street level,
 where the water stops. Its :class:`~gisroads.synthetic.network.Scene` renders like any
 other (:func:`~gisroads.synthetic.cloud.render_cloud`,
