@@ -402,8 +402,9 @@ IMAGERY_PATHS = ("baseline", "convnet", "convnet_0.3", "convnet_0.4", "convnet_0
                  "papers", "papers_convnet", "papers_model", "prob_0.4",
                  "prob_adapted_0.4", "prob_context_0.3", "prob_context_0.4", "prob_context_0.5")
 """Paths of :func:`case_imagery_real`: the naive baseline; the convolutional network's
-probability through raster_to_network at its own threshold (``convnet``, the default path)
-and at three others; the papers' pipeline without a model, with the network's probability
+probability through raster_to_network at the pipeline's threshold (``convnet``, the default
+path: the model's, lowered per image by :func:`gisroads.imagery.pipeline.image_threshold`)
+and at three fixed ones; the papers' pipeline without a model, with the network's probability
 and with the adapted boosted trees' probability (road-part criterion and gap context); the
 boosted trees' probability alone through raster_to_network, not adapted, adapted, and
 adapted then re-scored by the context model (:mod:`gisroads.learn.context`, ``boosted``)."""
@@ -469,10 +470,12 @@ def _imagery_paths(record):
             ("prob_adapted", adapted, adapted_s, (0.4,)),
             ("prob_context", context, adapted_s + context_s, (0.3, 0.4, 0.5))):
         for k, threshold in enumerate(thresholds):
+            path = name if name == "convnet" and k == 0 else f"{name}_{threshold}"
+            # the default path leaves the threshold to the pipeline (per image)
             roads, seconds = _timed(extract_image_roads, record.image, probability=raster,
                                     method=PROBABILITY_METHOD,
-                                    probability_threshold=threshold)
-            path = name if name == "convnet" and k == 0 else f"{name}_{threshold}"
+                                    probability_threshold=None if path == "convnet"
+                                    else threshold)
             runs[path] = (roads.network, seconds + extra, {}, None)
     return runs, auc
 

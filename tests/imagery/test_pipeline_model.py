@@ -1,5 +1,7 @@
 """The imagery pipeline with a learned road probability (beyond the papers): the probability
 as road-part criterion and gap context, the probability path, models by name and file."""
+import dataclasses
+
 import numpy as np
 import pytest
 import rasterio.features
@@ -8,6 +10,8 @@ from gisroads.evaluate import buffer_metrics
 from gisroads.geo import GeoRaster
 from gisroads.imagery.pipeline import PROBABILITY_METHOD, extract_image_roads, resolve_model
 from gisroads.learn import RoadModel, save_model
+from gisroads.learn.convnet import load_convnet
+from gisroads.learn.training import ROAD_LAYER
 from gisroads.parallel import pinned_threads
 from gisroads.synthetic import make_scene, render_image
 
@@ -58,6 +62,29 @@ def test_a_good_probability_in_the_papers_stages_and_alone(scene_rgb):
     assert (path.network.centrelines.method == PROBABILITY_METHOD).all()
     scores = _scores(path, scene)
     assert scores.completeness > 0.9 and scores.correctness > 0.95  # measured 0.98 / 1.00
+
+
+def test_the_network_threshold_drops_on_an_image_it_is_unsure_of(scene_rgb):
+    """The default path lowers the network's threshold on an image whose probability stays
+    low everywhere (an unfamiliar sensor): roads at 0.35 over 0.02 are found, where the
+    model's own threshold finds none; a flat low probability stays roadless; a model
+    fine-tuned on the image's road layer keeps its threshold."""
+    scene, rgb, surface = scene_rgb
+    faint = GeoRaster(np.where(surface, 0.35, 0.02).astype(np.float32), rgb.transform,
+                      rgb.crs)
+    roads = extract_image_roads(rgb, probability=faint)
+    assert roads.report["threshold"] == pytest.approx(0.6 * 0.35)
+    scores = _scores(roads, scene)
+    assert scores.completeness > 0.9 and scores.correctness > 0.95
+    model = load_convnet()
+    fixed = extract_image_roads(rgb, probability=faint, probability_threshold=model.threshold)
+    assert len(fixed.network.centrelines) == 0
+    flat = GeoRaster(np.full(rgb.shape, 0.1, np.float32), rgb.transform, rgb.crs)
+    assert len(extract_image_roads(rgb, probability=flat).network.centrelines) == 0
+    tuned = dataclasses.replace(model, metadata={**model.metadata, "trained_on": ROAD_LAYER})
+    kept = extract_image_roads(rgb, probability=faint, model=tuned)
+    assert kept.report["threshold"] == model.threshold
+    assert len(kept.network.centrelines) == 0
 
 
 def test_models_by_name_file_and_errors(scene_rgb, tmp_path):
