@@ -13,7 +13,7 @@ from .common import (VECTOR_SUFFIXES, describe_file, network_summary, parse_metr
                      read_image, stage_default)
 from .demo import DEMO_CLOUD, DEMO_IMAGE, DEMO_IMAGE_TRUTH, demo_job
 from .evaluate import evaluate_job, synth_job
-from .imagery import image_job, train_job
+from .imagery import grouping_job, image_job, segmentation_job, train_job
 from .lidar import (blocks_job, evidence_job, ground_intensity_job, lidar_job,
                     lidar_segmentation_job, likelihood_job, min_cover_job,
                     rectangles_network_job, tag_job, train_lidar_job)
@@ -25,19 +25,25 @@ JOBS = {function.__name__: function for function in (
     evaluate_job, synth_job, image_job, train_job, blocks_job, evidence_job,
     ground_intensity_job, lidar_job, lidar_segmentation_job, likelihood_job, min_cover_job,
     rectangles_network_job, tag_job, vectorize_job, attractor_job, register_job, snakes_job,
-    update_job, train_lidar_job)}
+    update_job, train_lidar_job, segmentation_job, grouping_job)}
 """The jobs by name, for ``gisroads job NAME`` (the QGIS algorithms' external-tool mode)."""
 
 
 def job_defaults(name: str) -> dict:
     """``{keyword: default}`` of the job ``name`` (those with a default, ``progress``
-    excepted), as JSON takes them: tuples as lists."""
-    defaults = {}
-    for parameter in inspect.signature(JOBS[name]).parameters.values():
-        if parameter.default is not inspect.Parameter.empty and parameter.name != "progress":
-            value = parameter.default
-            defaults[parameter.name] = list(value) if isinstance(value, tuple) else value
-    return defaults
+    excepted), as JSON takes them: tuples as lists, also inside mappings."""
+    return {parameter.name: _as_json(parameter.default)
+            for parameter in inspect.signature(JOBS[name]).parameters.values()
+            if parameter.default is not inspect.Parameter.empty
+            and parameter.name != "progress"}
+
+
+def _as_json(value):
+    if isinstance(value, (tuple, list)):
+        return [_as_json(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _as_json(v) for k, v in value.items()}
+    return value
 
 
 def run_job(name: str, arguments: dict, progress=None) -> dict:
@@ -60,6 +66,7 @@ __all__ = [
     "evaluate_job", "synth_job", "image_job", "train_job", "blocks_job", "evidence_job",
     "ground_intensity_job", "lidar_job", "lidar_segmentation_job", "likelihood_job",
     "min_cover_job", "rectangles_network_job", "tag_job", "vectorize_job", "attractor_job",
-    "register_job", "snakes_job", "update_job", "train_lidar_job", "JOBS", "job_defaults",
+    "register_job", "snakes_job", "update_job", "train_lidar_job", "segmentation_job",
+    "grouping_job", "JOBS", "job_defaults",
     "run_job",
 ]

@@ -1,20 +1,27 @@
 """The imagery jobs: road extraction from an aerial image (Grote & Rottensteiner's stages
-with a learned road cue) and training that cue on an image from a road layer."""
+with a learned road cue), its segmentation and grouping stages alone, and training that cue
+on an image from a road layer."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import geopandas as gpd
+import shapely
 
 from ..errors import GisroadsError
+from ..geo import GeoRaster
+from ..imagery.grouping import CRITERIA as GROUPING_CRITERIA
+from ..imagery.grouping import group_segments
 from ..imagery.pipeline import extract_image_roads, resolve_model
+from ..imagery.segments import frame_to_labels, segment_image, segments_to_frame
+from ..io.vector import write_geopackage
 from ..io.raster import read_raster, write_geotiff
 from ..learn.convnet import FINE_TUNE_STEPS
 from ..learn.model import save_model, with_metadata
 from ..learn.training import train_from_layer
 from ..progress import Progress, report, scaled
-from .common import (_map_lines, _network_quicklook, _write_network, network_summary,
-                     read_image, stage_default)
+from .common import (_layer, _map_lines, _network_quicklook, _write_network,
+                     network_summary, read_image, stage_default)
 
 
 def image_job(image_path, out_path, *, nir_band: int | None = None,
@@ -166,3 +173,70 @@ def _fine_tune_job(image, roads, out_path, *, image_path, roads_path, width_fiel
     report(progress, 1.0, "done")
     return {"model": path, "steps": steps, "road_share": metadata["road_share"],
             "roads": len(roads)}
+
+
+def _segment_layer(frame: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
+    """Segments with one geometry type (MultiPolygon), so any GIS layer takes them."""
+    parts, owner = shapely.get_parts(frame.geometry.values, return_index=True)
+    return frame.set_geometry(gpd.GeoSeries(shapely.multipolygons(parts, indices=owner),
+                                            index=frame.index, crs=frame.crs))
+
+
+def _segment_labels(segments, image: GeoRaster, id_field: str):
+    labels = frame_to_labels(_layer(segments, "segments"), image, id_column=id_field)
+    if (labels < 0).all():
+        raise GisroadsError(f"{segments}: no segment polygon overlaps the image")
+    return labels
+
+
+def segmentation_job(image_path, segments_path, *, nir_band: int | None = None,
+                     red_band: int | None = None, n_segments: int | None = None,
+                     n_superpixels: int | None = None,
+                     ndvi_threshold: float = stage_default(segment_image, "ndvi_threshold"),
+                     w_ndvi: float = stage_default(segment_image, "w_ndvi"),
+                     progress: Progress = None) -> dict:
+    """Imagery stage 1: the NCut over-segmentation of an image
+    (:func:`gisroads.imagery.segments.segment_image`; ``n_segments`` and ``n_superpixels``
+    None or 0 for their ground-size defaults).
+
+    Writes ``segments_path`` (GeoPackage, layer ``segments``: ``segment_id``, ``area_px``,
+    MultiPolygons in the image's CRS).
+    """
+    image = read_raster(image_path)
+    labels = segment_image(image, nir_band=nir_band, red_band=red_band,
+                           n_segments=n_segments or None, n_superpixels=n_superpixels or None,
+                           ndvi_threshold=ndvi_threshold, w_ndvi=w_ndvi, progress=progress)
+    frame = _segment_layer(segments_to_frame(labels, image))
+    write_geopackage(segments_path, {"segments": frame})
+    return {"segments": Path(segments_path), "n_segments": len(frame)}
+
+
+def grouping_job(image_path, segments, grouped_path, *, id_field: str = "segment_id",
+                 nir_band: int | None = None, dsm_path=None,
+                 merge_fraction: float = stage_default(group_segments, "merge_fraction"),
+                 max_iterations: int = stage_default(group_segments, "max_iterations"),
+                 criteria: dict = GROUPING_CRITERIA,
+                 split_branches: bool = stage_default(group_segments, "split_branches"),
+                 min_branch_m: float = stage_default(group_segments, "min_branch_m"),
+                 progress: Progress = None) -> dict:
+    """Imagery stage 2: adjacent segments merged by the paper's criteria and fuzzy rules,
+    segments spanning junctions split (:func:`gisroads.imagery.grouping.group_segments`).
+
+    ``segments``: a polygon file (or ``path|layername=``) whose ``id_field`` numbers the
+    segments, e.g. :func:`segmentation_job`'s; ``criteria``: ``{name: (poor, very_good)}``
+    for any of :data:`gisroads.imagery.grouping.CRITERIA`. Writes ``grouped_path``
+    (GeoPackage, layer ``segments``, as :func:`segmentation_job`).
+    """
+    image = read_raster(image_path)
+    dsm = read_raster(dsm_path) if dsm_path else None
+    labels = _segment_labels(segments, image, id_field)
+    grouped = group_segments(labels, image, dsm=dsm, nir_band=nir_band,
+                             merge_fraction=merge_fraction, max_iterations=max_iterations,
+                             criteria={**GROUPING_CRITERIA,
+                                       **{k: tuple(v) for k, v in criteria.items()}},
+                             split_branches=split_branches, min_branch_m=min_branch_m,
+                             progress=progress)
+    frame = _segment_layer(segments_to_frame(grouped, image))
+    write_geopackage(grouped_path, {"segments": frame})
+    return {"segments": Path(grouped_path), "n_input": int(labels.max()) + 1,
+            "n_segments": len(frame)}

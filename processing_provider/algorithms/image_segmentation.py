@@ -1,22 +1,39 @@
-"""NCut segmentation (imagery): an aerial image over-segmented into polygons (Grote &
-Rottensteiner 2010, Sec. 2.1.1)."""
+"""NCut over-segmentation of an aerial image (Grote & Rottensteiner 2010, Sec. 2.1.1)."""
+import tempfile
+from pathlib import Path
+
 from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterFeatureSink, QgsProcessingParameterNumber)
 
-from gisroads.imagery.segments import (NDVI_THRESHOLD, SEGMENT_AREA_M2, SUPERPIXEL_AREA_M2,
-                                       W_NDVI, segment_image, segments_to_frame)
-
-from ..convert import gisroads_errors, progress_callback
-from .base import GisroadsAlgorithm
-from .imagery_inputs import (IMAGE_HELP, RED_BAND_HELP, band_options, imagery_parameters,
-                             read_raster_input, write_segments)
+from ..loading import ApplyStyle, on_load, style_path
+from .base import JobAlgorithm
+from .imagery_inputs import IMAGE_HELP, RED_BAND_HELP, imagery_parameters
 
 
-class ImageSegmentation(GisroadsAlgorithm):
+def band_arguments(algorithm, parameters, context) -> dict:
+    """The image path and the ``nir_band`` / ``red_band`` a stage's job takes (1-based, None
+    when not given), from the imagery parameters ``algorithm`` declares."""
+    arguments = {"image_path": algorithm.parameterAsRasterLayer(parameters, "IMAGE",
+                                                                context).source()}
+    for name, keyword in (("NIR_BAND", "nir_band"), ("RED_BAND", "red_band")):
+        if algorithm.parameterDefinition(name) is not None:
+            arguments[keyword] = algorithm.parameterAsInt(parameters, name, context) or None
+    return arguments
+
+
+def segments_to_sink(algorithm, parameters, name: str, context, path: str, feedback) -> str:
+    """The ``segments`` layer a stage's job wrote into the sink ``name``, styled."""
+    output = algorithm.layer_to_sink(parameters, name, context, path, "segments", feedback)
+    on_load(context, output, ApplyStyle(style_path("segments")))
+    return output
+
+
+class ImageSegmentation(JobAlgorithm):
     NAME = "imagesegmentation"
     DISPLAY_NAME = "NCut segmentation (imagery)"
     GROUP = "Imagery"
     STAGE = 1
+    JOB = "segmentation_job"
     HELP = (
         "<p>Over-segments an aerial image with normalized cuts, the first stage of Grote "
         "&amp; Rottensteiner's road extraction (2010, Sec. 2.1.1): segment borders should "
@@ -41,19 +58,20 @@ class ImageSegmentation(GisroadsAlgorithm):
         ) + [
             (QgsProcessingParameterNumber("N_SEGMENTS", self.tr("Number of segments (0: auto)"),
                                           integer, 0, minValue=0),
-             f"target over-segmentation size; 0: one segment per {SEGMENT_AREA_M2:g} m2 of "
-             "image (at least 100 pixels each)"),
+             "target over-segmentation size; 0: about one segment per road width squared "
+             "of ground (at least 100 pixels each)"),
             (QgsProcessingParameterNumber("N_SUPERPIXELS",
                                           self.tr("Number of superpixels (0: auto)"),
                                           integer, 0, minValue=0),
-             f"graph nodes of the cut; 0: one per {SUPERPIXEL_AREA_M2:g} m2 (at least 25 "
-             "pixels each), at least twice the segments"),
+             "graph nodes of the cut; 0: a quarter of a segment's ground each (at least "
+             "25 pixels), at least twice the segments"),
             (QgsProcessingParameterNumber("NDVI_THRESHOLD", self.tr("NDVI threshold"), double,
-                                          NDVI_THRESHOLD, minValue=-1.0, maxValue=1.0),
+                                          self.default("ndvi_threshold"), minValue=-1.0,
+                                          maxValue=1.0),
              "NDVI between vegetation and the rest (with a NIR band only); the paper adapts "
              "it per data set"),
             (QgsProcessingParameterNumber("W_NDVI", self.tr("NDVI factor w_NDVI"), double,
-                                          W_NDVI, minValue=1e-6, maxValue=1.0),
+                                          self.default("w_ndvi"), minValue=1e-6, maxValue=1.0),
              "affinity factor across the NDVI threshold, 0 < w_NDVI << 1; 1 turns it off"),
             (QgsProcessingParameterFeatureSink("OUTPUT", self.tr("Segments"),
                                                QgsProcessing.TypeVectorPolygon),
@@ -63,17 +81,14 @@ class ImageSegmentation(GisroadsAlgorithm):
         self.addOutput(QgsProcessingOutputNumber("SEGMENTS", self.tr("Segments made")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        with gisroads_errors():
-            image = read_raster_input(self, parameters, "IMAGE", context)
-            labels = segment_image(
-                image, **band_options(self, parameters, context),
-                n_segments=self.parameterAsInt(parameters, "N_SEGMENTS", context) or None,
-                n_superpixels=self.parameterAsInt(parameters, "N_SUPERPIXELS", context) or None,
+        with tempfile.TemporaryDirectory(prefix="gisroads-segments-") as folder:
+            path = str(Path(folder) / "segments.gpkg")
+            result = self.run_job(dict(
+                **band_arguments(self, parameters, context), segments_path=path,
+                n_segments=self.parameterAsInt(parameters, "N_SEGMENTS", context),
+                n_superpixels=self.parameterAsInt(parameters, "N_SUPERPIXELS", context),
                 ndvi_threshold=self.parameterAsDouble(parameters, "NDVI_THRESHOLD", context),
-                w_ndvi=self.parameterAsDouble(parameters, "W_NDVI", context),
-                progress=progress_callback(feedback))
-            frame = segments_to_frame(labels, image)
-        output = write_segments(self, parameters, "OUTPUT", context, frame, feedback)
-        feedback.pushInfo(f"{len(frame)} segments")
-        return {"OUTPUT": output, "SEGMENTS": len(frame)}
-
+                w_ndvi=self.parameterAsDouble(parameters, "W_NDVI", context)), feedback)
+            output = segments_to_sink(self, parameters, "OUTPUT", context, path, feedback)
+        feedback.pushInfo(f"{result['n_segments']} segments")
+        return {"OUTPUT": output, "SEGMENTS": result["n_segments"]}

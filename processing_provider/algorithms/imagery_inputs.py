@@ -1,14 +1,11 @@
 """What the imagery algorithms (Grote & Rottensteiner) share: the image, segment, band and DSM
-inputs, declared in one place and read back in one place, and the segment polygon output."""
-import geopandas as gpd
-import shapely
+inputs, declared in one place and read back in one place, and the segment polygon output.
+
+The declarations import nothing of gisroads (the job algorithms declare their parameters
+with them in a QGIS without it); the readers import it when they run."""
 from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingParameterBand,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
                        QgsProcessingParameterRasterLayer)
-
-from gisroads.io.raster import read_raster
-
-from ..convert import frame_to_sink, gisroads_errors, source_to_frame, style_on_load
 
 # band parameter: keyword of the gisroads functions that take it
 BANDS = {"NIR_BAND": "nir_band", "RED_BAND": "red_band"}
@@ -57,6 +54,8 @@ def band_options(algorithm, parameters, context) -> dict:
 def read_raster_input(algorithm, parameters, name: str, context):
     """The GeoRaster of raster parameter ``name``, None when an optional one is not given.
     Raises RasterError: read it inside ``gisroads_errors()``."""
+    from gisroads.io.raster import read_raster
+
     layer = algorithm.parameterAsRasterLayer(parameters, name, context)
     return None if layer is None else read_raster(layer.source())
 
@@ -65,6 +64,8 @@ def read_segment_labels(algorithm, parameters, context, feedback, burn) -> tuple
     """``(image, dsm, labels)``: the IMAGE and DSM rasters (dsm None when not given) and the
     SEGMENTS polygons burnt into labels on the image's grid by ``burn(segments, image,
     id_column=...)`` with their ID_FIELD (segment_id when empty)."""
+    from ..convert import gisroads_errors, source_to_frame
+
     segments = source_to_frame(algorithm.parameterAsSource(parameters, "SEGMENTS", context),
                                feedback)
     id_field = (algorithm.parameterAsFields(parameters, "ID_FIELD", context)
@@ -80,6 +81,11 @@ def read_segment_labels(algorithm, parameters, context, feedback, burn) -> tuple
 
 def write_segments(algorithm, parameters, name, context, frame, feedback) -> str:
     """Segments into a polygon sink (one MultiPolygon type for all), styled as segments."""
+    import geopandas as gpd
+    import shapely
+
+    from ..convert import frame_to_sink, style_on_load
+
     parts, owner = shapely.get_parts(frame.geometry.values, return_index=True)
     frame = frame.set_geometry(gpd.GeoSeries(shapely.multipolygons(parts, indices=owner),
                                              index=frame.index, crs=frame.crs))

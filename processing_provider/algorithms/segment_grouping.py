@@ -1,14 +1,14 @@
 """Segment grouping: adjacent segments merged with Grote & Rottensteiner's criteria and fuzzy
 rules (2010, Sec. 2.1.2), junction-spanning segments split."""
+import tempfile
+from pathlib import Path
+
 from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterBoolean,
                        QgsProcessingParameterFeatureSink, QgsProcessingParameterNumber)
 
-from gisroads.imagery.segments import frame_to_labels, segments_to_frame
-from gisroads.imagery.grouping import CRITERIA, MIN_BRANCH_M, group_segments
-
-from ..convert import gisroads_errors, progress_callback
-from .base import GisroadsAlgorithm
-from .imagery_inputs import band_options, imagery_parameters, read_segment_labels, write_segments
+from .base import JobAlgorithm
+from .image_segmentation import band_arguments, segments_to_sink
+from .imagery_inputs import imagery_parameters
 
 # criterion: (label, help); each gets a "poor" and a "very good" limit parameter
 LIMITS = {
@@ -23,11 +23,12 @@ LIMITS = {
 }
 
 
-class SegmentGrouping(GisroadsAlgorithm):
+class SegmentGrouping(JobAlgorithm):
     NAME = "segmentgrouping"
     DISPLAY_NAME = "Segment grouping"
     GROUP = "Imagery"
     STAGE = 2
+    JOB = "grouping_job"
     HELP = (
         "<p>Merges adjacent segments of an over-segmentation (e.g. from <i>NCut "
         "segmentation (imagery)</i>, possibly edited) into larger segments, following "
@@ -55,21 +56,23 @@ class SegmentGrouping(GisroadsAlgorithm):
             dsm="optional: surface heights in metres; adds the height criterion") + [
             (QgsProcessingParameterNumber("MERGE_FRACTION",
                                           self.tr("Share of candidates merged per iteration"),
-                                          double, 0.1, minValue=0.001, maxValue=1.0),
+                                          double, self.default("merge_fraction"),
+                                          minValue=0.001, maxValue=1.0),
              "the paper merges the best 10 % of candidate pairs per iteration"),
             (QgsProcessingParameterNumber("MAX_ITERATIONS", self.tr("Most iterations"),
-                                          QgsProcessingParameterNumber.Integer, 200,
-                                          minValue=1),
+                                          QgsProcessingParameterNumber.Integer,
+                                          self.default("max_iterations"), minValue=1),
              "the grouping stops earlier when no pair is a candidate"),
             (QgsProcessingParameterBoolean("SPLIT", self.tr("Split segments spanning "
-                                                            "junctions"), True),
+                                                            "junctions"),
+                                           self.default("split_branches")),
              "cut segments whose skeleton has three or more long branches into their arms"),
             (QgsProcessingParameterNumber("MIN_BRANCH", self.tr("Long branch (metres)"),
-                                          double, MIN_BRANCH_M, minValue=0.0),
+                                          double, self.default("min_branch_m"), minValue=0.0),
              "length a skeleton branch must reach beyond the junction to count as an arm"),
         ]
         for criterion, (label, text) in LIMITS.items():
-            poor, very_good = CRITERIA[criterion]
+            poor, very_good = self.default("criteria")[criterion]
             for suffix, value, word in (("POOR", poor, "poor"),
                                         ("GOOD", very_good, "very good")):
                 params.append((QgsProcessingParameterNumber(
@@ -83,21 +86,25 @@ class SegmentGrouping(GisroadsAlgorithm):
                                                                      "grouping")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        image, dsm, labels = read_segment_labels(self, parameters, context, feedback,
-                                                 frame_to_labels)
         criteria = {c: (self.parameterAsDouble(parameters, f"{c.upper()}_POOR", context),
                         self.parameterAsDouble(parameters, f"{c.upper()}_GOOD", context))
                     for c in LIMITS}
-        with gisroads_errors():
-            grouped = group_segments(
-                labels, image, dsm=dsm, **band_options(self, parameters, context),
+        dsm = self.parameterAsRasterLayer(parameters, "DSM", context)
+        with tempfile.TemporaryDirectory(prefix="gisroads-grouping-") as folder:
+            path = str(Path(folder) / "grouped.gpkg")
+            result = self.run_job(dict(
+                **band_arguments(self, parameters, context),
+                segments=self.source_path(parameters, "SEGMENTS", context, feedback),
+                grouped_path=path,
+                id_field=(self.parameterAsFields(parameters, "ID_FIELD", context)
+                          or ["segment_id"])[0],
+                dsm_path=None if dsm is None else dsm.source(),
                 merge_fraction=self.parameterAsDouble(parameters, "MERGE_FRACTION", context),
                 max_iterations=self.parameterAsInt(parameters, "MAX_ITERATIONS", context),
                 criteria=criteria,
                 split_branches=self.parameterAsBoolean(parameters, "SPLIT", context),
-                min_branch_m=self.parameterAsDouble(parameters, "MIN_BRANCH", context),
-                progress=progress_callback(feedback))
-            frame = segments_to_frame(grouped, image)
-        output = write_segments(self, parameters, "OUTPUT", context, frame, feedback)
-        feedback.pushInfo(f"{labels.max() + 1} segments grouped into {len(frame)}")
-        return {"OUTPUT": output, "SEGMENTS": len(frame)}
+                min_branch_m=self.parameterAsDouble(parameters, "MIN_BRANCH", context)),
+                feedback)
+            output = segments_to_sink(self, parameters, "OUTPUT", context, path, feedback)
+        feedback.pushInfo(f"{result['n_input']} segments grouped into {result['n_segments']}")
+        return {"OUTPUT": output, "SEGMENTS": result["n_segments"]}

@@ -10,6 +10,7 @@ from pathlib import Path
 import geopandas as gpd
 import numpy as np
 import pytest
+import shapely
 
 from gisroads.io.las import read_las
 from gisroads.io.raster import read_raster
@@ -266,3 +267,57 @@ def test_lidar_road_network_with_a_model_of_the_area_both_ways(run_algorithm, li
     for name in ("a.gpkg", "b.gpkg"):
         lines = gpd.read_file(tmp_path / name, layer="road_centrelines")
         assert "model" in lines.cues.iloc[0].split(",")
+
+
+def test_image_segmentation_and_grouping_both_ways(both_ways, tmp_path):
+    """A 100 x 100 m synthetic image (a road across a lawn, 0.5 m): the same segments
+    whichever way the stages ran, and the grouping's refusal of segments off the image."""
+    from affine import Affine
+    from pyproj import CRS
+    from qgis.core import QgsProcessingContext, QgsProcessingException, QgsProcessingFeedback
+
+    from gisroads.geo import GeoRaster
+    from gisroads.io.raster import write_geotiff
+    from gisroads.io.vector import write_geopackage
+    from processing_provider.algorithms.segment_grouping import SegmentGrouping
+
+    grid = Affine(0.5, 0, 500000.0, 0, -0.5, 4500100.0)
+    image = np.empty((3, 200, 200))
+    image[:] = np.array([80.0, 112.0, 52.0])[:, None, None]
+    image[:, 90:106] = np.array([86.0, 88.0, 91.0])[:, None, None]  # an 8 m road
+    image += np.random.default_rng(0).normal(0, 4, image.shape)
+    write_geotiff(tmp_path / "image.tif", GeoRaster(np.clip(image, 0, 255).astype(np.uint8),
+                                                    grid, CRS("EPSG:32633")))
+    segments = both_ways("imagesegmentation",
+                         {"IMAGE": str(tmp_path / "image.tif"), "N_SEGMENTS": 40,
+                          "OUTPUT": tmp_path / "segments.gpkg"}, tmp_path / "segments")
+    (ours, here), (theirs, there) = segments["in-process"], segments["external"]
+    a, b = (gpd.read_file(folder / "segments.gpkg") for folder in (here, there))
+    assert ours["SEGMENTS"] == len(a) >= 30 and theirs["SEGMENTS"] == len(b)
+    # one NCut; its eigenvectors may differ in the last bits between processes
+    assert abs(len(a) - len(b)) <= 0.1 * len(a)
+    assert a.area.sum() == pytest.approx(100.0 * 100.0) == b.area.sum()
+    assert str(a.crs) == str(b.crs) == "EPSG:32633"
+    grouped = both_ways("segmentgrouping",
+                        {"IMAGE": str(tmp_path / "image.tif"),
+                         "SEGMENTS": f"{here / 'segments.gpkg'}|layername=segments",
+                         "OUTPUT": tmp_path / "grouped.gpkg"}, tmp_path / "grouped")
+    (ours, here), (theirs, there) = grouped["in-process"], grouped["external"]
+    assert ours["SEGMENTS"] == theirs["SEGMENTS"] < len(a) / 2
+    a, b = (gpd.read_file(folder / "grouped.gpkg") for folder in (here, there))
+    assert shapely.union_all(a.geometry.values).symmetric_difference(
+        shapely.union_all(b.geometry.values)).area < 1.0
+    assert a.segment_id.is_unique
+
+    far = gpd.GeoDataFrame({"segment_id": [0]}, geometry=[shapely.box(0, 0, 10, 10)],
+                           crs="EPSG:32633")
+    write_geopackage(tmp_path / "far.gpkg", {"segments": far})
+    algorithm = SegmentGrouping(_external_gisroads())
+    algorithm.initAlgorithm()
+    params = {"IMAGE": str(tmp_path / "image.tif"), "SEGMENTS": str(tmp_path / "far.gpkg"),
+              "OUTPUT": str(tmp_path / "out.gpkg")}
+    context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
+    assert algorithm.prepare(params, context, feedback)
+    with pytest.raises(QgsProcessingException, match="no segment polygon overlaps the image"):
+        algorithm.runPrepared(params, context, feedback)
+    assert not (tmp_path / "out.gpkg").exists()
