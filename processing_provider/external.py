@@ -30,6 +30,7 @@ from .algorithms.base import (add_scene_parameters, background_output, city_bloc
 from .algorithms.curb_attractor import CurbAttractorMap
 from .algorithms.evaluate_network import EvaluateRoadNetwork
 from .algorithms.image_segmentation import ImageSegmentation
+from .algorithms.junction_construction import JunctionConstruction
 from .algorithms.lidar_evidence import LidarRoadEvidence
 from .algorithms.lidar_ground_intensity import LidarGroundIntensity
 from .algorithms.lidar_likelihood import LidarLikelihood
@@ -38,7 +39,9 @@ from .algorithms.lidar_rectangles_network import RectanglesToNetwork
 from .algorithms.lidar_segmentation import LidarSegmentation
 from .algorithms.open_network import OpenRoadNetwork
 from .algorithms.register_map import RegisterRoadMap
+from .algorithms.road_parts import RoadPartFiltering
 from .algorithms.segment_grouping import SegmentGrouping
+from .algorithms.subgraph_linking import SubgraphLinking
 from .algorithms.tag_points import TagRoadPoints
 from .algorithms.train_lidar_model import TrainLidarRoadModel
 from .loading import (load_beneath_on_completion, load_geopackage_on_completion,
@@ -436,6 +439,7 @@ EXTERNAL_ALGORITHMS = (ExternalLidarRoadNetwork, ExternalImageryRoadNetwork,
 JOB_ALGORITHMS = (LidarGroundIntensity, LidarSegmentation, LidarLikelihood, LidarMinCover,
                   RectanglesToNetwork, LidarRoadEvidence, TagRoadPoints, RegisterRoadMap,
                   CurbAttractorMap, EvaluateRoadNetwork, TrainLidarRoadModel,
-                  ImageSegmentation, SegmentGrouping)
+                  ImageSegmentation, SegmentGrouping, RoadPartFiltering, SubgraphLinking,
+                  JunctionConstruction)
 """The algorithms whose one class runs in both modes (:class:`.algorithms.base.JobAlgorithm`):
 given the executable, through ``gisroads job``."""

@@ -13,11 +13,12 @@ from .common import (VECTOR_SUFFIXES, describe_file, network_summary, parse_metr
                      read_image, stage_default)
 from .demo import DEMO_CLOUD, DEMO_IMAGE, DEMO_IMAGE_TRUTH, demo_job
 from .evaluate import evaluate_job, synth_job
-from .imagery import grouping_job, image_job, segmentation_job, train_job
+from .imagery import (grouping_job, image_job, road_parts_job, segmentation_job,
+                      train_job)
 from .lidar import (blocks_job, evidence_job, ground_intensity_job, lidar_job,
                     lidar_segmentation_job, likelihood_job, min_cover_job,
                     rectangles_network_job, tag_job, train_lidar_job)
-from .network import vectorize_job
+from .network import junctions_job, linking_job, vectorize_job
 from .snakes import attractor_job, register_job, snakes_job
 from .update import update_job
 
@@ -25,7 +26,8 @@ JOBS = {function.__name__: function for function in (
     evaluate_job, synth_job, image_job, train_job, blocks_job, evidence_job,
     ground_intensity_job, lidar_job, lidar_segmentation_job, likelihood_job, min_cover_job,
     rectangles_network_job, tag_job, vectorize_job, attractor_job, register_job, snakes_job,
-    update_job, train_lidar_job, segmentation_job, grouping_job)}
+    update_job, train_lidar_job, segmentation_job, grouping_job, road_parts_job,
+    linking_job, junctions_job)}
 """The jobs by name, for ``gisroads job NAME`` (the QGIS algorithms' external-tool mode)."""
 
 
@@ -67,6 +69,6 @@ __all__ = [
     "ground_intensity_job", "lidar_job", "lidar_segmentation_job", "likelihood_job",
     "min_cover_job", "rectangles_network_job", "tag_job", "vectorize_job", "attractor_job",
     "register_job", "snakes_job", "update_job", "train_lidar_job", "segmentation_job",
-    "grouping_job", "JOBS", "job_defaults",
+    "grouping_job", "road_parts_job", "linking_job", "junctions_job", "JOBS", "job_defaults",
     "run_job",
 ]

@@ -13,6 +13,8 @@ from ..geo import GeoRaster
 from ..imagery.grouping import CRITERIA as GROUPING_CRITERIA
 from ..imagery.grouping import group_segments
 from ..imagery.pipeline import extract_image_roads, resolve_model
+from ..imagery.roadparts import CRITERIA as ROAD_PART_CRITERIA
+from ..imagery.roadparts import extract_road_parts, rasterize_segments
 from ..imagery.segments import frame_to_labels, segment_image, segments_to_frame
 from ..io.vector import write_geopackage
 from ..io.raster import read_raster, write_geotiff
@@ -182,8 +184,8 @@ def _segment_layer(frame: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
                                             index=frame.index, crs=frame.crs))
 
 
-def _segment_labels(segments, image: GeoRaster, id_field: str):
-    labels = frame_to_labels(_layer(segments, "segments"), image, id_column=id_field)
+def _segment_labels(segments, image: GeoRaster, id_field: str, burn=frame_to_labels):
+    labels = burn(_layer(segments, "segments"), image, id_column=id_field)
     if (labels < 0).all():
         raise GisroadsError(f"{segments}: no segment polygon overlaps the image")
     return labels
@@ -240,3 +242,32 @@ def grouping_job(image_path, segments, grouped_path, *, id_field: str = "segment
     write_geopackage(grouped_path, {"segments": frame})
     return {"segments": Path(grouped_path), "n_input": int(labels.max()) + 1,
             "n_segments": len(frame)}
+
+
+def road_parts_job(image_path, segments, road_parts_path, *, id_field: str = "segment_id",
+                   nir_band: int | None = None, red_band: int | None = None, dsm_path=None,
+                   criteria: dict = ROAD_PART_CRITERIA,
+                   merge: bool = stage_default(extract_road_parts, "merge"),
+                   max_direction_diff_rad: float = stage_default(extract_road_parts,
+                                                                 "max_direction_diff_rad"),
+                   progress: Progress = None) -> dict:
+    """Imagery stage 3: the road-part shape filter of every segment
+    (:func:`gisroads.imagery.roadparts.extract_road_parts`).
+
+    ``segments`` as in :func:`grouping_job`; ``criteria``: any of
+    :data:`gisroads.imagery.roadparts.CRITERIA`. Writes ``road_parts_path`` (GeoPackage):
+    ``segments``, every segment with its measurements, ``passed``, ``reason`` and
+    ``failures``, and ``road_parts``, the parts' centre lines.
+    """
+    image = read_raster(image_path)
+    dsm = read_raster(dsm_path) if dsm_path else None
+    labels = _segment_labels(segments, image, id_field, rasterize_segments)
+    criteria = {k: tuple(v) if isinstance(v, list) else v for k, v in criteria.items()}
+    result = extract_road_parts(labels, image, nir_band=nir_band, red_band=red_band, dsm=dsm,
+                                merge=merge, max_direction_diff_rad=max_direction_diff_rad,
+                                progress=progress, **{**ROAD_PART_CRITERIA, **criteria})
+    write_geopackage(road_parts_path, {"segments": _segment_layer(result.segments),
+                                       "road_parts": result.road_parts})
+    return {"road_parts": Path(road_parts_path), "n_parts": len(result.road_parts),
+            "n_segments": len(result.segments),
+            "n_passed": int(result.segments["passed"].sum()), "cues": result.cues["cues"]}

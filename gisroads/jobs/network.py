@@ -1,12 +1,20 @@
-"""The network job: any road raster (a mask or a probability) to a road network."""
+"""The network jobs: any road raster (a mask or a probability) to a road network; the
+network stages of the imagery method alone: subgraph linking of road parts, and junction
+construction of any line layer."""
 from __future__ import annotations
 
 from pathlib import Path
 
 from ..errors import GisroadsError
+from ..imagery.cues import context_rasters, image_cues, normalised_dsm
+from ..io.raster import read_raster
+from ..io.vector import write_geopackage
+from ..network.junctions import road_strings_from_lines, strings_to_network
 from ..network.rasters import THRESHOLD, raster_to_network
+from ..network.subgraph import edge_weights, gap_edges, link_road_parts, road_strings
 from ..progress import Progress, report, scaled
-from .common import _network_quicklook, _write_network, network_summary, read_image
+from .common import (_layer, _network_quicklook, _warn_if_no_road, _write_network,
+                     network_summary, read_image, stage_default)
 
 
 def vectorize_job(raster_path, out_path, *, band: int | None = None,
@@ -44,3 +52,95 @@ def vectorize_job(raster_path, out_path, *, band: int | None = None,
                                      f"{len(network.junctions)} junctions")
     report(progress, 1.0, "done")
     return result
+
+
+def linking_job(road_parts, linked_path, *, image_path=None, nir_band: int | None = None,
+                red_band: int | None = None, dsm_path=None, edited_gap_edges=None,
+                max_gap_m: float = stage_default(gap_edges, "max_gap_m"),
+                max_gap_relative: float = stage_default(gap_edges, "max_gap_relative"),
+                max_direction_diff_rad: float = stage_default(gap_edges,
+                                                              "max_direction_diff_rad"),
+                max_lateral_offset_m: float = stage_default(gap_edges, "max_lateral_offset_m"),
+                max_overlap_m: float = stage_default(gap_edges, "max_overlap_m"),
+                small_gap_m: float = stage_default(edge_weights, "small_gap_m"),
+                progress: Progress = None) -> dict:
+    """Subgraph linking (Grote et al. 2012, Sec. 2.2): gap edges between the ends of road
+    parts, their context and weights, the integer program's selection, road strings
+    (:func:`gisroads.network.subgraph.link_road_parts`).
+
+    ``road_parts``: line file (or ``path|layername=``) with ``part_id``, ``width_m``,
+    ``quality`` and band means, e.g. :func:`road_parts_job`'s. The optional image and DSM
+    give the gaps' context (shadow, asphalt, vegetation, buildings, vehicles); they must be
+    in the parts' CRS. ``edited_gap_edges``: a ``gap_edges`` layer of an earlier run, its
+    ``selected`` edited by hand: the strings then follow it and nothing is recomputed.
+    Writes ``linked_path`` (GeoPackage): ``gap_edges`` and ``road_strings``.
+    """
+    parts = _layer(road_parts, "road_parts")
+    if edited_gap_edges is not None:
+        gaps = _layer(edited_gap_edges, "gap_edges")
+        strings = road_strings(parts, gaps)
+    else:
+        gaps, strings = link_road_parts(
+            parts, **_gap_context(parts.crs, image_path, dsm_path, nir_band, red_band),
+            gap_options={"max_gap_m": max_gap_m, "max_gap_relative": max_gap_relative,
+                         "max_direction_diff_rad": max_direction_diff_rad,
+                         "max_lateral_offset_m": max_lateral_offset_m,
+                         "max_overlap_m": max_overlap_m},
+            weight_options={"small_gap_m": small_gap_m}, progress=progress)
+    write_geopackage(linked_path, {"gap_edges": gaps, "road_strings": strings})
+    return {"linked": Path(linked_path), "gap_edges": len(gaps),
+            "selected": int(gaps["selected"].fillna(False).astype(bool).sum()),
+            "road_strings": len(strings)}
+
+
+def _gap_context(crs, image_path, dsm_path, nir_band, red_band) -> dict:
+    """Keyword arguments of link_road_parts for the optional context rasters."""
+    image = read_raster(image_path) if image_path else None
+    dsm = read_raster(dsm_path) if dsm_path else None
+    for raster, name in ((image, "image"), (dsm, "DSM")):
+        if raster is not None and None not in (raster.crs, crs) and raster.crs != crs:
+            raise GisroadsError(f"the {name} is in another CRS than the road parts; "
+                                "reproject it")
+    if image is None and dsm is None:
+        return {}
+    if image is None:
+        return {"transform": dsm.transform, "ndsm": normalised_dsm(dsm, dsm)}
+    cues = image_cues(image, nir_band=nir_band, red_band=red_band, dsm=dsm)
+    return {"transform": image.transform, **context_rasters(cues)}
+
+
+def junctions_job(lines, out_path, *, extent=None,
+                  width_m: float = stage_default(road_strings_from_lines, "width_m"),
+                  quality: float = stage_default(road_strings_from_lines, "quality"),
+                  tolerance_m: float = stage_default(strings_to_network, "tolerance_m"),
+                  min_search_radius_m: float = stage_default(strings_to_network,
+                                                             "min_search_radius_m"),
+                  max_search_radius_m: float = stage_default(strings_to_network,
+                                                             "max_search_radius_m"),
+                  collinear_deg: float = stage_default(strings_to_network, "collinear_deg"),
+                  overlap_share: float = stage_default(strings_to_network, "overlap_share"),
+                  min_total_length_m: float = stage_default(strings_to_network,
+                                                            "min_total_length_m"),
+                  border_m: float = stage_default(strings_to_network, "border_m"),
+                  progress: Progress = None) -> dict:
+    """Junction construction and network generation (Grote et al. 2012, Sec. 2.3) of any
+    line layer (:func:`gisroads.network.junctions.strings_to_network`).
+
+    ``lines``: a line file (or ``path|layername=``), e.g. :func:`linking_job`'s road
+    strings or lines drawn by hand; ``width_m`` and ``quality`` fill rows without them.
+    ``extent``: ``(xmin, ymin, xmax, ymax)`` of the image the strings come from, in their
+    CRS (components leaving it are kept however short). Writes ``out_path``: the network's
+    layers and ``junction_connections``.
+    """
+    source, lines = lines, _layer(lines, "road_strings")
+    strings = road_strings_from_lines(lines, width_m=width_m, quality=quality)
+    network, connections = strings_to_network(
+        strings, extent=None if extent is None else tuple(extent), crs=lines.crs,
+        tolerance_m=tolerance_m, min_search_radius_m=min_search_radius_m,
+        max_search_radius_m=max_search_radius_m, collinear_deg=collinear_deg,
+        overlap_share=overlap_share, min_total_length_m=min_total_length_m,
+        border_m=border_m, progress=progress)
+    write_geopackage(out_path, {**network.layers(), "junction_connections": connections})
+    _warn_if_no_road(network, source)
+    kept = int((connections["verified"] & connections["significant"]).sum())
+    return {**network_summary(out_path, network), "connections": kept}

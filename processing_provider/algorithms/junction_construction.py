@@ -2,23 +2,15 @@
 from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterExtent,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber)
 
-from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
-from gisroads.network.junctions import (BORDER_M, COLLINEAR_DEG, DEFAULT_QUALITY,
-                                      DEFAULT_WIDTH_M, MAX_SEARCH_RADIUS_M,
-                                      MIN_SEARCH_RADIUS_M, MIN_TOTAL_LENGTH_M, OVERLAP_SHARE,
-                                      TOLERANCE_M, road_strings_from_lines,
-                                      strings_to_network)
-from gisroads.io.vector import write_geopackage
-
-from ..convert import gisroads_errors, progress_callback, source_to_frame
 from ..loading import load_geopackage_on_completion
-from .base import GisroadsAlgorithm, network_output
+from .base import JobAlgorithm, network_output
 
 CONNECTIONS = "junction_connections"
 
 
-class JunctionConstruction(GisroadsAlgorithm):
+class JunctionConstruction(JobAlgorithm):
     NAME = "junctionconstruction"
+    JOB = "junctions_job"
     DISPLAY_NAME = "Junction construction and network generation"
     GROUP = "Imagery"
     STAGE = 5
@@ -54,41 +46,46 @@ class JunctionConstruction(GisroadsAlgorithm):
              "its border with two open ends are kept however short"),
             (QgsProcessingParameterNumber("DEFAULT_WIDTH",
                                           self.tr("Width where none is given (metres)"),
-                                          double, DEFAULT_WIDTH_M, minValue=0.1),
+                                          double, self.default("width_m"), minValue=0.1),
              "used for lines without a width_m value"),
             (QgsProcessingParameterNumber("DEFAULT_QUALITY",
                                           self.tr("Quality where none is given (0-1)"),
-                                          double, DEFAULT_QUALITY, minValue=0.0,
+                                          double, self.default("quality"), minValue=0.0,
                                           maxValue=1.0),
              "used for lines without a quality value; sets their search radius"),
             (QgsProcessingParameterNumber("TOLERANCE",
                                           self.tr("Polygon approximation tolerance (metres)"),
-                                          double, TOLERANCE_M, minValue=0.0),
+                                          double, self.default("tolerance_m"), minValue=0.0),
              "largest distance of a string's vertices from its approximated centre line"),
             (QgsProcessingParameterNumber("MIN_RADIUS",
                                           self.tr("Search radius at quality 0 (metres)"),
-                                          double, MIN_SEARCH_RADIUS_M, minValue=0.1),
+                                          double, self.default("min_search_radius_m"),
+                                          minValue=0.1),
              "radius of the semicircle searched ahead of a road end of the worst quality"),
             (QgsProcessingParameterNumber("MAX_RADIUS",
                                           self.tr("Search radius at quality 1 (metres)"),
-                                          double, MAX_SEARCH_RADIUS_M, minValue=0.1),
+                                          double, self.default("max_search_radius_m"),
+                                          minValue=0.1),
              "radius for the best roads; linear in quality in between"),
             (QgsProcessingParameterNumber("COLLINEAR",
                                           self.tr("Collinear roads: largest direction "
                                                   "difference (degrees)"),
-                                          double, COLLINEAR_DEG, minValue=0.0, maxValue=89.0),
+                                          double, self.default("collinear_deg"), minValue=0.0,
+                                          maxValue=89.0),
              "roads closer in direction are joined end to end, never through an "
              "intersection"),
             (QgsProcessingParameterNumber("OVERLAP", self.tr("Overlap share that deletes a "
                                                              "road"),
-                                          double, OVERLAP_SHARE, minValue=0.0, maxValue=1.0),
+                                          double, self.default("overlap_share"), minValue=0.0,
+                                          maxValue=1.0),
              "a road whose area is covered by other roads for more than this share goes"),
             (QgsProcessingParameterNumber("MIN_LENGTH",
                                           self.tr("Minimum length of a component (metres)"),
-                                          double, MIN_TOTAL_LENGTH_M, minValue=0.0),
+                                          double, self.default("min_total_length_m"),
+                                          minValue=0.0),
              "shorter isolated networks (roads and junction connections) are dropped"),
             (QgsProcessingParameterNumber("BORDER", self.tr("Near the border (metres)"),
-                                          double, BORDER_M, minValue=0.0),
+                                          double, self.default("border_m"), minValue=0.0),
              "open ends this close to the extent's border count as leaving the image"),
             (network_output(self.tr, "GeoPackage receiving road_centrelines, road_polygons, "
                                      "junctions and junction_connections"), None),
@@ -100,31 +97,25 @@ class JunctionConstruction(GisroadsAlgorithm):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         source = self.parameterAsSource(parameters, "ROAD_STRINGS", context)
-        lines = source_to_frame(source, feedback)
         extent = None
         if parameters.get("EXTENT") not in (None, ""):
             box = self.parameterAsExtent(parameters, "EXTENT", context, source.sourceCrs())
-            extent = (box.xMinimum(), box.yMinimum(), box.xMaximum(), box.yMaximum())
+            extent = [box.xMinimum(), box.yMinimum(), box.xMaximum(), box.yMaximum()]
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
 
         def number(name):
             return self.parameterAsDouble(parameters, name, context)
 
-        with gisroads_errors():
-            road_strings = road_strings_from_lines(lines, width_m=number("DEFAULT_WIDTH"),
-                                                   quality=number("DEFAULT_QUALITY"))
-            network, connections = strings_to_network(
-                road_strings, extent=extent, tolerance_m=number("TOLERANCE"),
-                min_search_radius_m=number("MIN_RADIUS"),
-                max_search_radius_m=number("MAX_RADIUS"), collinear_deg=number("COLLINEAR"),
-                overlap_share=number("OVERLAP"), min_total_length_m=number("MIN_LENGTH"),
-                border_m=number("BORDER"), progress=progress_callback(feedback))
-            write_geopackage(out, network.layers())
-        load_geopackage_on_completion(context, out, (POLYGONS, CONNECTIONS, CENTRELINES,
-                                                     JUNCTIONS), group="roads")
-        kept = int((connections["verified"] & connections["significant"]).sum())
-        result = {"roads": len(network.centrelines),
-                  "length_m": float(network.centrelines["length_m"].sum()),
-                  "junctions": len(network.junctions)}
+        result = self.run_job(dict(
+            lines=self.source_path(parameters, "ROAD_STRINGS", context, feedback),
+            out_path=out, extent=extent, width_m=number("DEFAULT_WIDTH"),
+            quality=number("DEFAULT_QUALITY"), tolerance_m=number("TOLERANCE"),
+            min_search_radius_m=number("MIN_RADIUS"), max_search_radius_m=number("MAX_RADIUS"),
+            collinear_deg=number("COLLINEAR"), overlap_share=number("OVERLAP"),
+            min_total_length_m=number("MIN_LENGTH"), border_m=number("BORDER")), feedback)
+        load_geopackage_on_completion(context, out, ("road_polygons", CONNECTIONS,
+                                                     "road_centrelines", "junctions"),
+                                      group="roads")
+        kept = result["connections"]
         return {"OUTPUT": out, "CONNECTIONS": kept,
                 **self.network_outputs(result, feedback, f", {kept} junction connections")}

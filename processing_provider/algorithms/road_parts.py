@@ -1,16 +1,16 @@
 """Road-part shape filtering (Grote & Rottensteiner): segments in, road-part centre lines out."""
-import numpy as np
+import math
+import tempfile
+from pathlib import Path
+
 from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingOutputString,
                        QgsProcessingParameterBoolean, QgsProcessingParameterFeatureSink,
                        QgsProcessingParameterNumber)
 
-from gisroads.imagery.cues import image_cues
-from gisroads.imagery.roadparts import CRITERIA, extract_road_parts, rasterize_segments
-
-from ..convert import frame_to_sink, gisroads_errors, progress_callback, style_on_load
-from .base import GisroadsAlgorithm
-from .imagery_inputs import (IMAGE_HELP, RED_BAND_HELP, band_options, imagery_parameters,
-                             read_segment_labels, write_segments)
+from ..loading import ApplyStyle, on_load, style_path
+from .base import JobAlgorithm
+from .image_segmentation import band_arguments, segments_to_sink
+from .imagery_inputs import IMAGE_HELP, RED_BAND_HELP, imagery_parameters
 
 # parameter: (label, criteria key and index for (min, max) pairs, help)
 THRESHOLDS = {
@@ -67,16 +67,12 @@ THRESHOLDS = {
 }
 
 
-def _default(key, index):
-    value = CRITERIA[key]
-    return float(value if index is None else value[index])
-
-
-class RoadPartFiltering(GisroadsAlgorithm):
+class RoadPartFiltering(JobAlgorithm):
     NAME = "roadparts"
     DISPLAY_NAME = "Road-part shape filtering"
     GROUP = "Imagery"
     STAGE = 3
+    JOB = "road_parts_job"
     HELP = (
         "<p>Tests every segment of an image segmentation against the road-part criteria of "
         "Grote &amp; Rottensteiner (2010, Sec. 2.1.3) with the parameters of Grote et al. "
@@ -109,16 +105,17 @@ class RoadPartFiltering(GisroadsAlgorithm):
             dsm="optional: surface heights in metres; adds the height test (normalised DSM)")
         for name, (label, (key, index), text) in THRESHOLDS.items():
             params.append((QgsProcessingParameterNumber(
-                name, self.tr(label), double, _default(key, index),
+                name, self.tr(label), double, self._default(key, index),
                 minValue=-1.0 if name in ("MAX_NDVI", "MAX_EXCESS_GREEN") else 0.0), text))
         params += [
             (QgsProcessingParameterBoolean("MERGE", self.tr("Merge adjacent road parts"),
-                                           True),
+                                           self.default("merge")),
              "merge touching parts of similar direction when the union still passes"),
             (QgsProcessingParameterNumber("MAX_DIRECTION",
                                           self.tr("Largest direction difference to merge "
-                                                  "(degrees)"), double, 20.0, minValue=0.0,
-                                          maxValue=90.0),
+                                                  "(degrees)"), double,
+                                          math.degrees(self.default("max_direction_diff_rad")),
+                                          minValue=0.0, maxValue=90.0),
              "main directions of two parts to merge differ by at most this"),
             (QgsProcessingParameterFeatureSink("OUTPUT_SEGMENTS", self.tr("Segments tested"),
                                                QgsProcessing.TypeVectorPolygon),
@@ -132,6 +129,10 @@ class RoadPartFiltering(GisroadsAlgorithm):
         self.addOutput(QgsProcessingOutputNumber("PARTS", self.tr("Road parts found")))
         self.addOutput(QgsProcessingOutputString("CUES", self.tr("Cues used")))
 
+    def _default(self, key, index):
+        value = self.default("criteria")[key]
+        return float(value if index is None else value[index])
+
     def _criteria(self, parameters, context) -> dict:
         criteria = {}
         for name, (_, (key, index), _) in THRESHOLDS.items():
@@ -139,28 +140,30 @@ class RoadPartFiltering(GisroadsAlgorithm):
             if index is None:
                 criteria[key] = value
             else:
-                criteria.setdefault(key, list(CRITERIA[key]))[index] = value
-        return {k: tuple(v) if isinstance(v, list) else v for k, v in criteria.items()}
+                criteria.setdefault(key, list(self.default("criteria")[key]))[index] = value
+        return criteria
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        image, dsm, labels = read_segment_labels(self, parameters, context, feedback,
-                                                 rasterize_segments)
-        with gisroads_errors():
-            feedback.setProgressText(self.tr("image cues"))
-            cues = image_cues(image, **band_options(self, parameters, context), dsm=dsm)
-            result = extract_road_parts(
-                labels, image, cues=cues,
+        dsm = self.parameterAsRasterLayer(parameters, "DSM", context)
+        with tempfile.TemporaryDirectory(prefix="gisroads-roadparts-") as folder:
+            path = str(Path(folder) / "road_parts.gpkg")
+            result = self.run_job(dict(
+                **band_arguments(self, parameters, context),
+                segments=self.source_path(parameters, "SEGMENTS", context, feedback),
+                road_parts_path=path,
+                id_field=(self.parameterAsFields(parameters, "ID_FIELD", context)
+                          or ["segment_id"])[0],
+                dsm_path=None if dsm is None else dsm.source(),
+                criteria=self._criteria(parameters, context),
                 merge=self.parameterAsBoolean(parameters, "MERGE", context),
-                max_direction_diff_rad=np.radians(
-                    self.parameterAsDouble(parameters, "MAX_DIRECTION", context)),
-                progress=progress_callback(feedback), **self._criteria(parameters, context))
-        outputs = {"OUTPUT_SEGMENTS": write_segments(self, parameters, "OUTPUT_SEGMENTS",
-                                                     context, result.segments, feedback),
-                   "ROAD_PARTS": frame_to_sink(self, parameters, "ROAD_PARTS", context,
-                                               result.road_parts, "LineString", feedback)}
-        style_on_load(context, outputs["ROAD_PARTS"], "road_parts")
-        passed = int(result.segments["passed"].sum())
-        feedback.pushInfo(f"{passed} road parts among {len(result.segments)} segments; "
-                          f"cues: {result.cues['cues']}")
-        return {**outputs, "PARTS": len(result.road_parts), "CUES": result.cues["cues"]}
-
+                max_direction_diff_rad=math.radians(
+                    self.parameterAsDouble(parameters, "MAX_DIRECTION", context))), feedback)
+            outputs = {
+                "OUTPUT_SEGMENTS": segments_to_sink(self, parameters, "OUTPUT_SEGMENTS",
+                                                    context, path, feedback),
+                "ROAD_PARTS": self.layer_to_sink(parameters, "ROAD_PARTS", context, path,
+                                                 "road_parts", feedback)}
+        on_load(context, outputs["ROAD_PARTS"], ApplyStyle(style_path("road_parts")))
+        feedback.pushInfo(f"{result['n_passed']} road parts among {result['n_segments']} "
+                          f"segments; cues: {result['cues']}")
+        return {**outputs, "PARTS": result["n_parts"], "CUES": result["cues"]}

@@ -1,22 +1,21 @@
 """Subgraph linking (integer program): gap hypotheses between road parts, the best kept."""
-import numpy as np
-from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutputNumber,
+import math
+import tempfile
+from pathlib import Path
+
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterFeatureSink, QgsProcessingParameterFeatureSource,
                        QgsProcessingParameterNumber)
 
-from gisroads.imagery.cues import context_rasters, image_cues, normalised_dsm
-from gisroads.network.subgraph import (MAX_DIRECTION_DIFF_RAD, MAX_GAP_M, MAX_GAP_RELATIVE,
-                                       MAX_LATERAL_OFFSET_M, MAX_OVERLAP_M, SMALL_GAP_M,
-                                       link_road_parts, road_strings)
-
-from ..convert import (frame_to_sink, gisroads_errors, progress_callback, source_to_frame,
-                       style_on_load)
-from .base import GisroadsAlgorithm
-from .imagery_inputs import band_options, imagery_parameters, read_raster_input
+from ..loading import ApplyStyle, on_load, style_path
+from .base import JobAlgorithm
+from .image_segmentation import band_arguments
+from .imagery_inputs import imagery_parameters
 
 
-class SubgraphLinking(GisroadsAlgorithm):
+class SubgraphLinking(JobAlgorithm):
     NAME = "subgraphlinking"
+    JOB = "linking_job"
     DISPLAY_NAME = "Subgraph linking (integer program)"
     GROUP = "Imagery"
     STAGE = 4
@@ -62,29 +61,30 @@ class SubgraphLinking(GisroadsAlgorithm):
             dsm="optional: surface heights in metres; buildings, vehicles and trees in the "
                 "gaps are found in its normalised heights") + [
             (QgsProcessingParameterNumber("MAX_GAP", self.tr("Largest gap (metres)"), double,
-                                          MAX_GAP_M, minValue=0.0),
+                                          self.default("max_gap_m"), minValue=0.0),
              "part ends further apart are never linked"),
             (QgsProcessingParameterNumber("MAX_GAP_RELATIVE",
                                           self.tr("Largest gap relative to the parts' lengths"),
-                                          double, MAX_GAP_RELATIVE, minValue=0.0),
+                                          double, self.default("max_gap_relative"), minValue=0.0),
              "the gap may be at most this times the two parts' lengths together"),
             (QgsProcessingParameterNumber("MAX_DIRECTION",
                                           self.tr("Largest direction difference (degrees)"),
-                                          double, float(np.degrees(MAX_DIRECTION_DIFF_RAD)),
+                                          double,
+                                          math.degrees(self.default("max_direction_diff_rad")),
                                           minValue=0.0, maxValue=180.0),
              "0 for a straight continuation"),
             (QgsProcessingParameterNumber("MAX_LATERAL",
                                           self.tr("Largest lateral offset (metres)"), double,
-                                          MAX_LATERAL_OFFSET_M, minValue=0.0),
+                                          self.default("max_lateral_offset_m"), minValue=0.0),
              "continuation smoothness: how far an end may lie beside the other part's "
              "extension"),
             (QgsProcessingParameterNumber("MAX_OVERLAP",
                                           self.tr("Largest overlap of linked ends (metres)"),
-                                          double, MAX_OVERLAP_M, minValue=0.0),
+                                          double, self.default("max_overlap_m"), minValue=0.0),
              "how far two linked ends may reach past each other (touching segments)"),
             (QgsProcessingParameterNumber("SMALL_GAP",
                                           self.tr("Small gap: context ignored below (metres)"),
-                                          double, SMALL_GAP_M, minValue=0.0),
+                                          double, self.default("small_gap_m"), minValue=0.0),
              "the context of shorter gaps is too small to judge"),
             (QgsProcessingParameterFeatureSink("GAP_EDGES", self.tr("Gap edges"),
                                                QgsProcessing.TypeVectorLine),
@@ -97,53 +97,32 @@ class SubgraphLinking(GisroadsAlgorithm):
         self.addOutput(QgsProcessingOutputNumber("SELECTED", self.tr("Gap edges kept")))
         self.addOutput(QgsProcessingOutputNumber("STRINGS", self.tr("Road strings")))
 
-    def _context(self, parameters, context, crs):
-        """Keyword arguments of link_road_parts for the optional rasters."""
-        image = read_raster_input(self, parameters, "IMAGE", context)
-        dsm = read_raster_input(self, parameters, "DSM", context)
-        for raster, name in ((image, "image"), (dsm, "DSM")):
-            if raster is not None and None not in (raster.crs, crs) and raster.crs != crs:
-                raise QgsProcessingException(
-                    self.tr(f"the {name} is in another CRS than the road parts; reproject it"))
-        if image is None and dsm is None:
-            return {}
-        if image is None:
-            return {"transform": dsm.transform, "ndsm": normalised_dsm(dsm, dsm)}
-        cues = image_cues(image, **band_options(self, parameters, context), dsm=dsm)
-        return {"transform": image.transform, **context_rasters(cues)}
-
-    def _link(self, parts, parameters, context, feedback):
-        """Generation, context, weights and the integer program with the parameters."""
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         def number(name):
             return self.parameterAsDouble(parameters, name, context)
 
-        return link_road_parts(
-            parts, **self._context(parameters, context, parts.crs),
-            progress=progress_callback(feedback),
-            gap_options={"max_gap_m": number("MAX_GAP"),
-                         "max_gap_relative": number("MAX_GAP_RELATIVE"),
-                         "max_direction_diff_rad": np.radians(number("MAX_DIRECTION")),
-                         "max_lateral_offset_m": number("MAX_LATERAL"),
-                         "max_overlap_m": number("MAX_OVERLAP")},
-            weight_options={"small_gap_m": number("SMALL_GAP")})
-
-    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        parts = source_to_frame(self.parameterAsSource(parameters, "ROAD_PARTS", context),
-                                feedback)
+        image = self.parameterAsRasterLayer(parameters, "IMAGE", context)
+        dsm = self.parameterAsRasterLayer(parameters, "DSM", context)
         edited = self.parameterAsSource(parameters, "EDITED_GAP_EDGES", context)
-        with gisroads_errors():
-            if edited is not None:
-                gaps = source_to_frame(edited, feedback)
-                strings = road_strings(parts, gaps)
-            else:
-                gaps, strings = self._link(parts, parameters, context, feedback)
-        outputs = {}
-        for param, layer, frame in (("GAP_EDGES", "gap_edges", gaps),
-                                    ("ROAD_STRINGS", "road_strings", strings)):
-            outputs[param] = frame_to_sink(self, parameters, param, context, frame,
-                                           "LineString", feedback)
-            style_on_load(context, outputs[param], layer)
-        selected = int(gaps["selected"].fillna(False).astype(bool).sum())
-        feedback.pushInfo(f"{len(gaps)} gap edges, {selected} kept; {len(strings)} road "
-                          "strings")
-        return {**outputs, "SELECTED": selected, "STRINGS": len(strings)}
+        with tempfile.TemporaryDirectory(prefix="gisroads-linking-") as folder:
+            path = str(Path(folder) / "linked.gpkg")
+            bands = band_arguments(self, parameters, context) if image is not None else {}
+            result = self.run_job(dict(
+                bands, road_parts=self.source_path(parameters, "ROAD_PARTS", context,
+                                                   feedback),
+                linked_path=path, dsm_path=None if dsm is None else dsm.source(),
+                edited_gap_edges=None if edited is None else self.source_path(
+                    parameters, "EDITED_GAP_EDGES", context, feedback),
+                max_gap_m=number("MAX_GAP"), max_gap_relative=number("MAX_GAP_RELATIVE"),
+                max_direction_diff_rad=math.radians(number("MAX_DIRECTION")),
+                max_lateral_offset_m=number("MAX_LATERAL"),
+                max_overlap_m=number("MAX_OVERLAP"), small_gap_m=number("SMALL_GAP")),
+                feedback)
+            outputs = {}
+            for param, layer in (("GAP_EDGES", "gap_edges"), ("ROAD_STRINGS", "road_strings")):
+                outputs[param] = self.layer_to_sink(parameters, param, context, path, layer,
+                                                    feedback)
+                on_load(context, outputs[param], ApplyStyle(style_path(layer)))
+        feedback.pushInfo(f"{result['gap_edges']} gap edges, {result['selected']} kept; "
+                          f"{result['road_strings']} road strings")
+        return {**outputs, "SELECTED": result["selected"], "STRINGS": result["road_strings"]}

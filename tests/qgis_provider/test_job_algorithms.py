@@ -4,6 +4,7 @@ fusa.laz, give the same files and results; the external mode takes its defaults 
 command and says its errors in one line."""
 import json
 import shutil
+import sqlite3
 import sys
 from pathlib import Path
 
@@ -269,9 +270,11 @@ def test_lidar_road_network_with_a_model_of_the_area_both_ways(run_algorithm, li
         assert "model" in lines.cues.iloc[0].split(",")
 
 
-def test_image_segmentation_and_grouping_both_ways(both_ways, tmp_path):
-    """A 100 x 100 m synthetic image (a road across a lawn, 0.5 m): the same segments
-    whichever way the stages ran, and the grouping's refusal of segments off the image."""
+def test_the_imagery_stages_both_ways(both_ways, tmp_path):
+    """A 100 x 100 m synthetic image (0.5 m): a road across a lawn, a tree crown over its
+    middle. The same segments, road parts, gap edges, strings and network whichever way the
+    five stages ran (each stage from the in-process output of the one before), and the
+    grouping's refusal of segments off the image."""
     from affine import Affine
     from pyproj import CRS
     from qgis.core import QgsProcessingContext, QgsProcessingException, QgsProcessingFeedback
@@ -285,6 +288,7 @@ def test_image_segmentation_and_grouping_both_ways(both_ways, tmp_path):
     image = np.empty((3, 200, 200))
     image[:] = np.array([80.0, 112.0, 52.0])[:, None, None]
     image[:, 90:106] = np.array([86.0, 88.0, 91.0])[:, None, None]  # an 8 m road
+    image[:, 84:112, 92:108] = np.array([40.0, 90.0, 30.0])[:, None, None]  # a crown
     image += np.random.default_rng(0).normal(0, 4, image.shape)
     write_geotiff(tmp_path / "image.tif", GeoRaster(np.clip(image, 0, 255).astype(np.uint8),
                                                     grid, CRS("EPSG:32633")))
@@ -308,6 +312,41 @@ def test_image_segmentation_and_grouping_both_ways(both_ways, tmp_path):
     assert shapely.union_all(a.geometry.values).symmetric_difference(
         shapely.union_all(b.geometry.values)).area < 1.0
     assert a.segment_id.is_unique
+
+    parts = both_ways("roadparts",
+                      {"IMAGE": str(tmp_path / "image.tif"),
+                       "SEGMENTS": str(here / "grouped.gpkg"),
+                       "OUTPUT_SEGMENTS": tmp_path / "tested.gpkg",
+                       "ROAD_PARTS": tmp_path / "parts.gpkg"}, tmp_path / "parts")
+    (ours, here), (theirs, there) = parts["in-process"], parts["external"]
+    assert ours["PARTS"] == theirs["PARTS"] >= 2 and ours["CUES"] == theirs["CUES"]
+    a, b = (gpd.read_file(folder / "parts.gpkg") for folder in (here, there))
+    np.testing.assert_allclose(sorted(a.length), sorted(b.length))
+    tested = gpd.read_file(here / "tested.gpkg")
+    assert {"passed", "reason", "failures"} <= set(tested.columns)
+    assert tested.passed.sum() >= ours["PARTS"]
+
+    linked = both_ways("subgraphlinking",
+                       {"ROAD_PARTS": str(here / "parts.gpkg"),
+                        "IMAGE": str(tmp_path / "image.tif"),
+                        "GAP_EDGES": tmp_path / "gaps.gpkg",
+                        "ROAD_STRINGS": tmp_path / "strings.gpkg"}, tmp_path / "linked")
+    (ours, here), (theirs, there) = linked["in-process"], linked["external"]
+    assert ours["SELECTED"] == theirs["SELECTED"] >= 1  # the gap under the crown
+    assert ours["STRINGS"] == theirs["STRINGS"] < len(a)
+    strings = gpd.read_file(here / "strings.gpkg")
+    assert strings.length.max() > 80.0
+
+    network = both_ways("junctionconstruction",
+                        {"ROAD_STRINGS": str(here / "strings.gpkg"),
+                         "OUTPUT": tmp_path / "roads.gpkg"}, tmp_path / "network")
+    (ours, here), (theirs, _) = network["in-process"], network["external"]
+    assert ours["ROADS"] == theirs["ROADS"] >= 1 and ours["CONNECTIONS"] == theirs["CONNECTIONS"]
+    assert ours["LENGTH_M"] == pytest.approx(theirs["LENGTH_M"], rel=1e-9)
+    assert ours["LENGTH_M"] > 80.0
+    with sqlite3.connect(here / "roads.gpkg") as con:
+        layers = {row[0] for row in con.execute("SELECT table_name FROM gpkg_contents")}
+    assert {"road_centrelines", "junctions", "junction_connections"} <= layers
 
     far = gpd.GeoDataFrame({"segment_id": [0]}, geometry=[shapely.box(0, 0, 10, 10)],
                            crs="EPSG:32633")

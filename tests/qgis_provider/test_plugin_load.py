@@ -238,12 +238,13 @@ def test_external_mode_runs_the_lidar_pipeline_through_gisroads(external_qgis_pr
     assert sorted(re.findall(r"^\s*(gisroads:\S+)", listed.stdout, flags=re.M)) == [
         "gisroads:cityblocks", "gisroads:curbattractormap", "gisroads:evaluateroadnetwork",
         "gisroads:imageryroadnetwork", "gisroads:imagesegmentation",
-        "gisroads:lidargroundintensity",
+        "gisroads:junctionconstruction", "gisroads:lidargroundintensity",
         "gisroads:lidarlikelihood", "gisroads:lidarmincover", "gisroads:lidarroadevidence",
         "gisroads:lidarroadnetwork", "gisroads:lidarsegmentation", "gisroads:openroadnetwork",
         "gisroads:rectanglestonetwork", "gisroads:registerroadmap",
-        "gisroads:ribbonsnakeroads", "gisroads:roadrastertonetwork", "gisroads:segmentgrouping",
-        "gisroads:setupgisroads",
+        "gisroads:ribbonsnakeroads", "gisroads:roadparts",
+        "gisroads:roadrastertonetwork", "gisroads:segmentgrouping", "gisroads:setupgisroads",
+        "gisroads:subgraphlinking",
         "gisroads:syntheticroadscene", "gisroads:tagroadpoints", "gisroads:trainlidarroadmodel",
         "gisroads:trainroadmodel"]
     out = tmp_path / "fusa.gpkg"
