@@ -270,11 +270,69 @@ def test_lidar_road_network_with_a_model_of_the_area_both_ways(run_algorithm, li
         assert "model" in lines.cues.iloc[0].split(",")
 
 
+def _imagery_stages_both_ways(both_ways, image: Path, folder: Path, n_segments: int) -> dict:
+    """The five imagery stages on ``image``, each run both ways from the in-process output of
+    the one before (``n_segments`` 0: the stage's own count); asserts that both ways agree
+    and returns each stage's in-process results and folder."""
+    segments = both_ways("imagesegmentation",
+                         {"IMAGE": str(image), "N_SEGMENTS": n_segments,
+                          "OUTPUT": folder / "segments.gpkg"}, folder / "segments")
+    (ours, here), (theirs, there) = segments["in-process"], segments["external"]
+    a, b = (gpd.read_file(f / "segments.gpkg") for f in (here, there))
+    assert ours["SEGMENTS"] == len(a) >= 0.75 * (n_segments or 100)
+    assert theirs["SEGMENTS"] == len(b)
+    # one NCut; its eigenvectors may differ in the last bits between processes
+    assert abs(len(a) - len(b)) <= 0.1 * len(a)
+    assert a.area.sum() == pytest.approx(b.area.sum()) and str(a.crs) == str(b.crs)
+    results = {"segments": (ours, here)}
+    grouped = both_ways("segmentgrouping",
+                        {"IMAGE": str(image),
+                         "SEGMENTS": f"{here / 'segments.gpkg'}|layername=segments",
+                         "OUTPUT": folder / "grouped.gpkg"}, folder / "grouped")
+    (ours, here), (theirs, there) = grouped["in-process"], grouped["external"]
+    results["grouped"] = grouped["in-process"]
+    assert ours["SEGMENTS"] == theirs["SEGMENTS"] < len(a)
+    a, b = (gpd.read_file(f / "grouped.gpkg") for f in (here, there))
+    assert shapely.union_all(a.geometry.values).symmetric_difference(
+        shapely.union_all(b.geometry.values)).area < 1.0
+    assert a.segment_id.is_unique
+    parts = both_ways("roadparts",
+                      {"IMAGE": str(image), "SEGMENTS": str(here / "grouped.gpkg"),
+                       "OUTPUT_SEGMENTS": folder / "tested.gpkg",
+                       "ROAD_PARTS": folder / "parts.gpkg"}, folder / "parts")
+    (ours, here), (theirs, there) = parts["in-process"], parts["external"]
+    results["parts"] = parts["in-process"]
+    assert ours["PARTS"] == theirs["PARTS"] and ours["CUES"] == theirs["CUES"]
+    a, b = (gpd.read_file(f / "parts.gpkg") for f in (here, there))
+    np.testing.assert_allclose(sorted(a.length), sorted(b.length))
+    tested = gpd.read_file(here / "tested.gpkg")
+    assert {"passed", "reason", "failures"} <= set(tested.columns)
+    assert tested.passed.sum() >= ours["PARTS"]
+    linked = both_ways("subgraphlinking",
+                       {"ROAD_PARTS": str(here / "parts.gpkg"), "IMAGE": str(image),
+                        "GAP_EDGES": folder / "gaps.gpkg",
+                        "ROAD_STRINGS": folder / "strings.gpkg"}, folder / "linked")
+    (ours, here), (theirs, there) = linked["in-process"], linked["external"]
+    results["linked"] = linked["in-process"]
+    assert ours["SELECTED"] == theirs["SELECTED"]
+    assert ours["STRINGS"] == theirs["STRINGS"] <= len(a)
+    network = both_ways("junctionconstruction",
+                        {"ROAD_STRINGS": str(here / "strings.gpkg"),
+                         "OUTPUT": folder / "roads.gpkg"}, folder / "network")
+    (ours, here), (theirs, _) = network["in-process"], network["external"]
+    results["network"] = network["in-process"]
+    assert ours["ROADS"] == theirs["ROADS"] and ours["CONNECTIONS"] == theirs["CONNECTIONS"]
+    assert ours["LENGTH_M"] == pytest.approx(theirs["LENGTH_M"], rel=1e-9)
+    with sqlite3.connect(here / "roads.gpkg") as con:
+        layers = {row[0] for row in con.execute("SELECT table_name FROM gpkg_contents")}
+    assert {"road_centrelines", "junctions", "junction_connections"} <= layers
+    return results
+
+
 def test_the_imagery_stages_both_ways(both_ways, tmp_path):
     """A 100 x 100 m synthetic image (0.5 m): a road across a lawn, a tree crown over its
-    middle. The same segments, road parts, gap edges, strings and network whichever way the
-    five stages ran (each stage from the in-process output of the one before), and the
-    grouping's refusal of segments off the image."""
+    middle: two road parts, linked under the crown into one road of the image's width;
+    and the grouping's refusal of segments off the image."""
     from affine import Affine
     from pyproj import CRS
     from qgis.core import QgsProcessingContext, QgsProcessingException, QgsProcessingFeedback
@@ -292,61 +350,11 @@ def test_the_imagery_stages_both_ways(both_ways, tmp_path):
     image += np.random.default_rng(0).normal(0, 4, image.shape)
     write_geotiff(tmp_path / "image.tif", GeoRaster(np.clip(image, 0, 255).astype(np.uint8),
                                                     grid, CRS("EPSG:32633")))
-    segments = both_ways("imagesegmentation",
-                         {"IMAGE": str(tmp_path / "image.tif"), "N_SEGMENTS": 40,
-                          "OUTPUT": tmp_path / "segments.gpkg"}, tmp_path / "segments")
-    (ours, here), (theirs, there) = segments["in-process"], segments["external"]
-    a, b = (gpd.read_file(folder / "segments.gpkg") for folder in (here, there))
-    assert ours["SEGMENTS"] == len(a) >= 30 and theirs["SEGMENTS"] == len(b)
-    # one NCut; its eigenvectors may differ in the last bits between processes
-    assert abs(len(a) - len(b)) <= 0.1 * len(a)
-    assert a.area.sum() == pytest.approx(100.0 * 100.0) == b.area.sum()
-    assert str(a.crs) == str(b.crs) == "EPSG:32633"
-    grouped = both_ways("segmentgrouping",
-                        {"IMAGE": str(tmp_path / "image.tif"),
-                         "SEGMENTS": f"{here / 'segments.gpkg'}|layername=segments",
-                         "OUTPUT": tmp_path / "grouped.gpkg"}, tmp_path / "grouped")
-    (ours, here), (theirs, there) = grouped["in-process"], grouped["external"]
-    assert ours["SEGMENTS"] == theirs["SEGMENTS"] < len(a) / 2
-    a, b = (gpd.read_file(folder / "grouped.gpkg") for folder in (here, there))
-    assert shapely.union_all(a.geometry.values).symmetric_difference(
-        shapely.union_all(b.geometry.values)).area < 1.0
-    assert a.segment_id.is_unique
-
-    parts = both_ways("roadparts",
-                      {"IMAGE": str(tmp_path / "image.tif"),
-                       "SEGMENTS": str(here / "grouped.gpkg"),
-                       "OUTPUT_SEGMENTS": tmp_path / "tested.gpkg",
-                       "ROAD_PARTS": tmp_path / "parts.gpkg"}, tmp_path / "parts")
-    (ours, here), (theirs, there) = parts["in-process"], parts["external"]
-    assert ours["PARTS"] == theirs["PARTS"] >= 2 and ours["CUES"] == theirs["CUES"]
-    a, b = (gpd.read_file(folder / "parts.gpkg") for folder in (here, there))
-    np.testing.assert_allclose(sorted(a.length), sorted(b.length))
-    tested = gpd.read_file(here / "tested.gpkg")
-    assert {"passed", "reason", "failures"} <= set(tested.columns)
-    assert tested.passed.sum() >= ours["PARTS"]
-
-    linked = both_ways("subgraphlinking",
-                       {"ROAD_PARTS": str(here / "parts.gpkg"),
-                        "IMAGE": str(tmp_path / "image.tif"),
-                        "GAP_EDGES": tmp_path / "gaps.gpkg",
-                        "ROAD_STRINGS": tmp_path / "strings.gpkg"}, tmp_path / "linked")
-    (ours, here), (theirs, there) = linked["in-process"], linked["external"]
-    assert ours["SELECTED"] == theirs["SELECTED"] >= 1  # the gap under the crown
-    assert ours["STRINGS"] == theirs["STRINGS"] < len(a)
-    strings = gpd.read_file(here / "strings.gpkg")
-    assert strings.length.max() > 80.0
-
-    network = both_ways("junctionconstruction",
-                        {"ROAD_STRINGS": str(here / "strings.gpkg"),
-                         "OUTPUT": tmp_path / "roads.gpkg"}, tmp_path / "network")
-    (ours, here), (theirs, _) = network["in-process"], network["external"]
-    assert ours["ROADS"] == theirs["ROADS"] >= 1 and ours["CONNECTIONS"] == theirs["CONNECTIONS"]
-    assert ours["LENGTH_M"] == pytest.approx(theirs["LENGTH_M"], rel=1e-9)
-    assert ours["LENGTH_M"] > 80.0
-    with sqlite3.connect(here / "roads.gpkg") as con:
-        layers = {row[0] for row in con.execute("SELECT table_name FROM gpkg_contents")}
-    assert {"road_centrelines", "junctions", "junction_connections"} <= layers
+    stages = _imagery_stages_both_ways(both_ways, tmp_path / "image.tif", tmp_path, 40)
+    assert stages["grouped"][0]["SEGMENTS"] < stages["segments"][0]["SEGMENTS"] / 2
+    assert stages["parts"][0]["PARTS"] >= 2
+    assert stages["linked"][0]["SELECTED"] >= 1 and stages["linked"][0]["STRINGS"] == 1
+    assert stages["network"][0]["ROADS"] == 1 and stages["network"][0]["LENGTH_M"] > 80.0
 
     far = gpd.GeoDataFrame({"segment_id": [0]}, geometry=[shapely.box(0, 0, 10, 10)],
                            crs="EPSG:32633")
@@ -360,3 +368,19 @@ def test_the_imagery_stages_both_ways(both_ways, tmp_path):
     with pytest.raises(QgsProcessingException, match="no segment polygon overlaps the image"):
         algorithm.runPrepared(params, context, feedback)
     assert not (tmp_path / "out.gpkg").exists()
+
+
+def test_the_imagery_stages_on_a_real_tile_both_ways(both_ways, shared_data, tmp_path):
+    """ETH tile satImage_001 (US suburb, 400 x 400 px, 0.6 m assumed) through the five
+    stages both ways: the papers' stages find its streets."""
+    from gisroads.evaluate import buffer_metrics
+    from gisroads.imagery.datasets import load_eth
+    from gisroads.io.raster import write_geotiff
+
+    record = load_eth(shared_data / "imagery", stems=["satImage_001"])[0]
+    write_geotiff(tmp_path / "image.tif", record.image)
+    stages = _imagery_stages_both_ways(both_ways, tmp_path / "image.tif", tmp_path, 0)
+    roads = gpd.read_file(stages["network"][1] / "roads.gpkg", layer="road_centrelines")
+    scores = buffer_metrics(roads, record.truth, buffer_m=3.0)
+    # measured 0.50 / 0.59 (quality 0.37; make bench's papers path: 0.367)
+    assert scores.completeness > 0.4 and scores.correctness > 0.5
