@@ -13,7 +13,7 @@ Standard library and qgis only: this module must import where gisroads cannot. T
 pipelines (LiDAR, imagery, map-guided snakes), the network stage and a few tools have an
 external twin here (:data:`EXTERNAL_ALGORITHMS`, their layers loaded as in-process:
 :mod:`.loading`); the stages that are one job of :mod:`gisroads.jobs` are one class for
-both modes (:data:`JOB_ALGORITHMS`); the other algorithms need the packages in QGIS.
+both modes (:data:`JOB_ALGORITHMS`); *Open road network GeoPackage* needs QGIS alone.
 """
 from __future__ import annotations
 
@@ -27,6 +27,7 @@ from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutpu
 
 from .algorithms.base import (add_scene_parameters, background_output, city_blocks_parameters,
                               lidar_model_input, train_parameters, workers_parameter)
+from .algorithms.compare_database import CompareWithRoadDatabase
 from .algorithms.curb_attractor import CurbAttractorMap
 from .algorithms.evaluate_network import EvaluateRoadNetwork
 from .algorithms.image_segmentation import ImageSegmentation
@@ -440,6 +441,6 @@ JOB_ALGORITHMS = (LidarGroundIntensity, LidarSegmentation, LidarLikelihood, Lida
                   RectanglesToNetwork, LidarRoadEvidence, TagRoadPoints, RegisterRoadMap,
                   CurbAttractorMap, EvaluateRoadNetwork, TrainLidarRoadModel,
                   ImageSegmentation, SegmentGrouping, RoadPartFiltering, SubgraphLinking,
-                  JunctionConstruction)
+                  JunctionConstruction, CompareWithRoadDatabase)
 """The algorithms whose one class runs in both modes (:class:`.algorithms.base.JobAlgorithm`):
 given the executable, through ``gisroads job``."""

@@ -4,46 +4,67 @@ from __future__ import annotations
 from pathlib import Path
 
 import geopandas as gpd
+import shapely
 
+from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..io.quicklook import write_quicklook
 from ..io.raster import read_raster
-from ..io.vector import read_layer, write_geopackage
+from ..io.vector import write_geopackage
 from ..progress import Progress, report, scaled
 from ..update import CHANGES, LAYERS, conflate, read_database
-from .common import stage_default
+from .common import _layer, _named_layer, stage_default
 
 
 def _coverage(path) -> GeoRaster | gpd.GeoDataFrame:
     """An observability coverage: a raster (non-zero cells observable) or polygons."""
     if Path(path).suffix.lower() in {".tif", ".tiff", ".vrt", ".img"}:
         return read_raster(path)
-    return read_layer(path)
+    return _layer(path, "coverage")
+
+
+def _database(source, layer: str | None, fid_field: str | None) -> gpd.GeoDataFrame:
+    """The road database with its feature ids as index: the source's, or those a field
+    carries (and the field itself left out)."""
+    path, named = _named_layer(source)
+    roads = read_database(path, layer or named)
+    if fid_field is None:
+        return roads
+    if fid_field not in roads:
+        raise GisroadsError(f"the database has no field {fid_field!r}")
+    return roads.set_index(roads[fid_field].astype("int64").rename(None)).drop(
+        columns=fid_field)
 
 
 def update_job(extracted, database, out_path, *, layer: str | None = None,
-               id_field: str | None = None, width_field: str | None = None,
+               id_field: str | None = None, fid_field: str | None = None,
+               width_field: str | None = None,
                tolerance_m: float = stage_default(conflate, "tolerance_m"),
-               search_m: float = stage_default(conflate, "search_m"), coverage=None,
-               quicklook=None, progress: Progress = None) -> dict:
+               search_m: float = stage_default(conflate, "search_m"),
+               width_tolerance_m: float = stage_default(conflate, "width_tolerance_m"),
+               coverage=None, quicklook=None, progress: Progress = None) -> dict:
     """Compare an extraction with a road database; write the change layers.
 
     Parameters
     ----------
     extracted : str or Path
         Extracted centre lines: a gisroads GeoPackage (its ``road_centrelines`` layer) or any
-        line file.
+        line file (``path|layername=`` names a layer).
     database : str or Path
-        Any OGR source (file, ``PG:`` connection string ...), any CRS.
+        Any OGR source (file, ``path|layername=``, ``PG:`` connection string ...), any CRS.
     out_path : str or Path
         GeoPackage receiving the styled layers ``confirmed``, ``missing``, ``new``, ``moved``
-        and ``proposed_update``, all in the database's CRS.
+        and ``proposed_update``, all in the database's CRS, in 2-D.
     layer : str, optional
         The database's layer (table); by default its first.
     id_field, width_field : str, optional
-        The database's feature id field (default: OGR's feature ids) and width field
-        (metres).
-    tolerance_m, search_m : float
+        The database's road id field (default: its feature ids) and width field (metres).
+    fid_field : str, optional
+        A field that carries the database's feature ids instead of the source's own (a copy
+        of a layer whose ids its file cannot keep, e.g. a PostGIS table or a selection
+        written to a temporary GeoPackage); it is not one of the database's fields in the
+        outputs.
+    tolerance_m, search_m, width_tolerance_m : float
         See :func:`gisroads.update.conflate` (metres).
     coverage : str or Path, optional
         Where the data could show a road: a polygon file, or a raster whose non-zero cells
@@ -57,13 +78,17 @@ def update_job(extracted, database, out_path, *, layer: str | None = None,
         Output path, feature count of each layer and count of each change.
     """
     report(progress, 0.0, "reading")
-    lines = read_layer(extracted)
-    roads = read_database(database, layer)
+    lines = _layer(extracted, "road_centrelines")
+    roads = _database(database, layer, fid_field)
     changes = conflate(lines, roads, id_field=id_field, width_field=width_field,
                        tolerance_m=tolerance_m, search_m=search_m,
+                       width_tolerance_m=width_tolerance_m,
                        coverage=_coverage(coverage) if coverage is not None else None,
                        progress=scaled(progress, 0.05, 0.9))
     report(progress, 0.9, "writing")
+    changes = {name: frame.set_geometry(gpd.GeoSeries(shapely.force_2d(frame.geometry.values),
+                                                      index=frame.index, crs=frame.crs))
+               for name, frame in changes.items()}
     write_geopackage(out_path, changes)
     counted = changes["proposed_update"]["change"].value_counts()
     result = {"gpkg": Path(out_path), **{name: len(changes[name]) for name in LAYERS},

@@ -1,17 +1,19 @@
 """Compare with road database: change layers of an existing road database from an extraction."""
-import shapely
-from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingOutputNumber,
-                       QgsProcessingParameterFeatureSink, QgsProcessingParameterFeatureSource,
-                       QgsProcessingParameterField, QgsProcessingParameterNumber,
-                       QgsProcessingParameterRasterLayer, QgsWkbTypes)
+import tempfile
+from pathlib import Path
 
-from gisroads.io.raster import read_raster
-from gisroads.jobs import stage_default
-from gisroads.update import CHANGES, conflate
+from qgis.core import (QgsFeature, QgsField, QgsFields, QgsProcessing, QgsProcessingException,
+                       QgsProcessingOutputNumber, QgsProcessingParameterFeatureSink,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
+                       QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer,
+                       QgsVectorFileWriter)
+from qgis.PyQt.QtCore import QVariant
 
-from ..convert import (frame_to_sink, gisroads_errors, progress_callback, source_to_frame,
-                       style_on_load)
-from .base import GisroadsAlgorithm
+from ..loading import ApplyStyle, on_load, style_path
+from .base import JobAlgorithm
+
+FID_FIELD = "gisroads_source_fid"
+"""The field that carries the database's feature ids to the job (a copy's own ids are new)."""
 
 #: Output parameter -> (layer name and style, display name, help).
 SINKS = {
@@ -22,8 +24,8 @@ SINKS = {
     "MISSING": ("missing", "Missing roads and stretches",
                 "database roads or stretches not seen: db_id, length_m, observable_share "
                 "and evidence (not_seen where the data could show the road, not_observable "
-                "where it could not, unknown without a coverage), the database's fields but "
-                "its primary key (a road can have several missing stretches)"),
+                "where it could not, unknown without a coverage), the database's fields (a "
+                "road can have several missing stretches)"),
     "NEW": ("new", "New roads",
             "extracted roads absent from the database: road_id, length_m, width_m, score, "
             "and start_db_id/end_db_id, the database roads their ends meet"),
@@ -37,8 +39,9 @@ SINKS = {
 }
 
 
-class CompareWithRoadDatabase(GisroadsAlgorithm):
+class CompareWithRoadDatabase(JobAlgorithm):
     NAME = "comparewithroaddatabase"
+    JOB = "update_job"
     DISPLAY_NAME = "Compare with road database"
     GROUP = "Road database update"
     HELP = (
@@ -83,17 +86,17 @@ class CompareWithRoadDatabase(GisroadsAlgorithm):
                                          optional=True),
              "field holding road widths in metres; empty: widths are measured, not compared"),
             (QgsProcessingParameterNumber("TOLERANCE", self.tr("Moved tolerance (metres)"),
-                                          double, stage_default(conflate, "tolerance_m"),
+                                          double, self.default("tolerance_m"),
                                           minValue=0.1),
              "a road whose median offset from the extraction exceeds this has moved"),
             (QgsProcessingParameterNumber("SEARCH", self.tr("Search distance (metres)"),
-                                          double, stage_default(conflate, "search_m"),
+                                          double, self.default("search_m"),
                                           minValue=0.5),
              "largest offset at which a database road and an extracted line can still be "
              "the same road: the largest displacement reported as moved"),
             (QgsProcessingParameterNumber("WIDTH_TOLERANCE",
                                           self.tr("Width tolerance (metres)"), double,
-                                          stage_default(conflate, "width_tolerance_m"),
+                                          self.default("width_tolerance_m"),
                                           minValue=0.0),
              "a measured width differing from the database's by more than this is a change"),
             (QgsProcessingParameterFeatureSource("COVERAGE",
@@ -118,58 +121,60 @@ class CompareWithRoadDatabase(GisroadsAlgorithm):
                                                      self.tr(f"number of {layer} features")))
 
     def _coverage(self, parameters, context, feedback):
-        """The coverage polygons or raster given, else None."""
-        polygons = self.parameterAsSource(parameters, "COVERAGE", context)
-        if polygons is not None:
-            return source_to_frame(polygons, feedback)
+        """The coverage polygons or raster given, as the job reads them, else None."""
+        if self.parameterAsSource(parameters, "COVERAGE", context) is not None:
+            return self.source_path(parameters, "COVERAGE", context, feedback)
         raster = self.parameterAsRasterLayer(parameters, "COVERAGE_RASTER", context)
-        if raster is not None:
-            return read_raster(raster.source())
-        return None
+        return None if raster is None else raster.source()
 
-    def _primary_key_fields(self, parameters, context) -> list[str]:
-        """The database layer's primary-key fields (a GeoPackage's fid, a PostGIS key)."""
-        layer = self.parameterAsVectorLayer(parameters, "DATABASE", context)
-        if layer is None:
-            return []
-        names = layer.fields().names()
-        return [names[i] for i in layer.dataProvider().pkAttributeIndexes()]
+    def _database_with_ids(self, parameters, context, feedback, path: str) -> str:
+        """The database layer (a file, a selection, a PostGIS or WFS table) copied into a
+        GeoPackage with its feature ids in :data:`FID_FIELD`, so the changes name the
+        layer's own ids whatever the copy numbers its features."""
+        source = self.parameterAsSource(parameters, "DATABASE", context)
+        fields = QgsFields(source.fields())
+        fields.append(QgsField(FID_FIELD, QVariant.LongLong))
+        options = QgsVectorFileWriter.SaveVectorOptions()
+        options.driverName, options.layerName = "GPKG", "database"
+        writer = QgsVectorFileWriter.create(path, fields, source.wkbType(), source.sourceCrs(),
+                                            context.transformContext(), options)
+        if writer.hasError():
+            raise QgsProcessingException(f"{path}: {writer.errorMessage()}")
+        for feature in source.getFeatures():
+            if feedback.isCanceled():
+                raise QgsProcessingException("cancelled")
+            copy = QgsFeature(fields)
+            copy.setGeometry(feature.geometry())
+            copy.setAttributes(feature.attributes() + [feature.id()])
+            writer.addFeature(copy)
+        del writer  # closes the file
+        return f"{path}|layername=database"
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        extracted = self.parameterAsSource(parameters, "EXTRACTED", context)
-        database = self.parameterAsSource(parameters, "DATABASE", context)
-        if extracted is None or database is None:
+        if None in (self.parameterAsSource(parameters, "EXTRACTED", context),
+                    self.parameterAsSource(parameters, "DATABASE", context)):
             raise QgsProcessingException(self.tr("both line layers are required"))
         feedback.setProgressText(self.tr("reading the layers"))
-        extracted_frame = source_to_frame(extracted, feedback)
-        database_frame = source_to_frame(database, feedback, fid_index=True)
-        with gisroads_errors():
-            changes = conflate(
-                extracted_frame, database_frame,
+        with tempfile.TemporaryDirectory(prefix="gisroads-compare-") as folder:
+            out = str(Path(folder) / "changes.gpkg")
+            result = self.run_job(dict(
+                extracted=self.source_path(parameters, "EXTRACTED", context, feedback),
+                database=self._database_with_ids(parameters, context, feedback,
+                                                 str(Path(folder) / "database.gpkg")),
+                out_path=out, fid_field=FID_FIELD,
                 id_field=self.parameterAsString(parameters, "ID_FIELD", context) or None,
                 width_field=self.parameterAsString(parameters, "WIDTH_FIELD", context) or None,
                 tolerance_m=self.parameterAsDouble(parameters, "TOLERANCE", context),
                 search_m=self.parameterAsDouble(parameters, "SEARCH", context),
                 width_tolerance_m=self.parameterAsDouble(parameters, "WIDTH_TOLERANCE",
                                                          context),
-                coverage=self._coverage(parameters, context, feedback),
-                progress=progress_callback(feedback))
-        # a GeoPackage sink takes a "fid" field for its feature ids: a road's several
-        # missing stretches would collide there, and db_id carries the key anyway
-        changes["missing"] = changes["missing"].drop(
-            columns=[c for c in self._primary_key_fields(parameters, context)
-                     if c in changes["missing"] and c != "db_id"])
-        multi = QgsWkbTypes.isMultiType(database.wkbType())
-        outputs = {}
-        for name, (layer, _, _) in SINKS.items():
-            frame = changes[layer]
-            frame = frame.set_geometry(shapely.force_2d(frame.geometry.values))
-            kind = ("MultiLineString" if multi or frame.geom_type.eq("MultiLineString").any()
-                    else "LineString")
-            outputs[name] = frame_to_sink(self, parameters, name, context, frame, kind,
-                                          feedback)
-            outputs[f"{name}_COUNT"] = len(frame)
-            style_on_load(context, outputs[name], layer)
-        counted = changes["proposed_update"]["change"].value_counts()
-        feedback.pushInfo(", ".join(f"{counted.get(c, 0)} {c}" for c in CHANGES))
+                coverage=self._coverage(parameters, context, feedback)), feedback)
+            outputs = {}
+            for name, (layer, _, _) in SINKS.items():
+                outputs[name] = self.layer_to_sink(parameters, name, context, out, layer,
+                                                   feedback)
+                outputs[f"{name}_COUNT"] = result[layer]
+                on_load(context, outputs[name], ApplyStyle(style_path(layer)))
+        feedback.pushInfo(", ".join(f"{count} {change}"
+                                    for change, count in result["changes"].items()))
         return outputs

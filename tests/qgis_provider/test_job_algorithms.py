@@ -384,3 +384,39 @@ def test_the_imagery_stages_on_a_real_tile_both_ways(both_ways, shared_data, tmp
     scores = buffer_metrics(roads, record.truth, buffer_m=3.0)
     # measured 0.50 / 0.59 (quality 0.37; make bench's papers path: 0.367)
     assert scores.completeness > 0.4 and scores.correctness > 0.5
+
+
+def test_compare_with_road_database_both_ways(both_ways, lidar_dir, tmp_path):
+    """fusa's truth as the road database (GeoJSON: feature ids from 0, which a GeoPackage
+    copy cannot keep) against an extraction lacking one of its roads and moving another by
+    8 m: the same changes both ways, naming the layer's own feature ids."""
+    from qgis.core import QgsVectorLayer
+
+    truth = lidar_dir / "ground_truth" / "fusa" / "centrelines.geojson"
+    lines = gpd.read_file(truth)
+    extracted = lines.drop(index=0)
+    extracted.loc[3, "geometry"] = extracted.loc[[3]].translate(xoff=8.0).iloc[0]
+    extracted.to_file(tmp_path / "extracted.gpkg", layer="road_centrelines", driver="GPKG")
+    ids = sorted(f.id() for f in QgsVectorLayer(str(truth), "db", "ogr").getFeatures())
+    assert ids == list(range(len(lines)))
+    sinks = {"CONFIRMED": "confirmed", "MISSING": "missing", "NEW": "new", "MOVED": "moved",
+             "PROPOSED_UPDATE": "proposed_update"}
+    runs = both_ways("comparewithroaddatabase",
+                     {"EXTRACTED": str(tmp_path / "extracted.gpkg"), "DATABASE": str(truth),
+                      **{name: tmp_path / f"{layer}.gpkg" for name, layer in sinks.items()}},
+                     tmp_path)
+    (ours, here), (theirs, there) = runs["in-process"], runs["external"]
+    assert {k: v for k, v in ours.items() if k.endswith("_COUNT")} \
+        == {k: v for k, v in theirs.items() if k.endswith("_COUNT")}
+    changes = {}
+    for layer in sinks.values():
+        a, b = (gpd.read_file(folder / f"{layer}.gpkg") for folder in (here, there))
+        assert list(a.columns) == list(b.columns), layer
+        if "db_id" in a:
+            assert sorted(a.db_id.dropna()) == sorted(b.db_id.dropna()), layer
+        changes[layer] = a
+    assert set(changes["missing"].db_id) == {0}        # the road the extraction lacks
+    assert set(changes["moved"].db_id) == {3}          # the road moved by 8 m
+    assert set(changes["confirmed"].db_id) == set(range(1, len(lines)))
+    assert set(changes["confirmed"]["id"]) == set(lines["id"][1:])   # its fields carried
+    assert "gisroads_source_fid" not in changes["proposed_update"]

@@ -236,7 +236,8 @@ def test_external_mode_runs_the_lidar_pipeline_through_gisroads(external_qgis_pr
     listed = external_qgis_process("list")
     assert "Traceback" not in listed.stdout + listed.stderr
     assert sorted(re.findall(r"^\s*(gisroads:\S+)", listed.stdout, flags=re.M)) == [
-        "gisroads:cityblocks", "gisroads:curbattractormap", "gisroads:evaluateroadnetwork",
+        "gisroads:cityblocks", "gisroads:comparewithroaddatabase", "gisroads:curbattractormap",
+        "gisroads:evaluateroadnetwork",
         "gisroads:imageryroadnetwork", "gisroads:imagesegmentation",
         "gisroads:junctionconstruction", "gisroads:lidargroundintensity",
         "gisroads:lidarlikelihood", "gisroads:lidarmincover", "gisroads:lidarroadevidence",
