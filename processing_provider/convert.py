@@ -36,18 +36,16 @@ _DTYPES = {QVariant.Int: "int64", QVariant.LongLong: "int64", QVariant.UInt: "in
            QVariant.ULongLong: "int64", QVariant.Double: "float64", QVariant.Bool: "bool"}
 
 
-def source_to_frame(source, feedback=None, *, fid_index: bool = False) -> gpd.GeoDataFrame:
-    """A QgsFeatureSource (layer or selection) as a GeoDataFrame in the source's CRS; with
-    ``fid_index``, indexed by QGIS's feature ids (a GeoPackage's fid, a PostGIS key)."""
+def source_to_frame(source, feedback=None) -> gpd.GeoDataFrame:
+    """A QgsFeatureSource (layer or selection) as a GeoDataFrame in the source's CRS."""
     if source is None:
         raise QgsProcessingException("the input layer could not be loaded")
     names = source.fields().names()
-    wkb, rows, fids = [], [], []
+    wkb, rows = [], []
     for i, feature in enumerate(source.getFeatures()):
         if feedback is not None and i % 1000 == 0:
             if feedback.isCanceled():
                 raise QgsProcessingException("cancelled")
-        fids.append(feature.id())
         geometry = feature.geometry()
         wkb.append(bytes(geometry.asWkb()) if not geometry.isNull() else None)
         # PyQt hands NULL attributes over as QVariant; every other value arrives as Python
@@ -58,11 +56,8 @@ def source_to_frame(source, feedback=None, *, fid_index: bool = False) -> gpd.Ge
     else:  # an empty layer keeps its field types (a writer refuses a text fid, for one)
         frame = pd.DataFrame({field.name(): pd.Series(dtype=_DTYPES.get(field.type(), object))
                               for field in source.fields()})
-    result = gpd.GeoDataFrame(frame, geometry=gpd.GeoSeries(geometries, index=frame.index),
-                              crs=to_pyproj(source.sourceCrs()))
-    if fid_index:
-        result.index = pd.Index(fids, dtype="int64")
-    return result
+    return gpd.GeoDataFrame(frame, geometry=gpd.GeoSeries(geometries, index=frame.index),
+                            crs=to_pyproj(source.sourceCrs()))
 
 
 def _field(name: str, dtype) -> QgsField:

@@ -53,7 +53,8 @@ def snakes_job(cloud_path, map_source, out_path, *,
     parameters as in :func:`gisroads.snakes.pipeline.extract_map_guided`. When no road is
     fitted the layers are empty, with a :class:`~gisroads.errors.NoRoadFoundWarning`.
     """
-    roads = extract_map_guided(cloud_path, _map_lines(map_source), curb_detector=curb_detector,
+    road_map = _map_lines(map_source)
+    roads = extract_map_guided(cloud_path, road_map, curb_detector=curb_detector,
                                cell_m=cell_m, snap_m=snap_m, clearance_m=clearance_m,
                                tagged_las=tagged_las, workers=workers, scheduler=scheduler,
                                work_dir=work_dir,
@@ -73,7 +74,7 @@ def snakes_job(cloud_path, map_source, out_path, *,
         report(progress, 0.97, "drawing the quick-look")
         crs = network.polygons.crs if roads.attractor is None else roads.attractor.crs
         write_quicklook(quicklook, [
-            (_map_lines(map_source).to_crs(crs),
+            (road_map.to_crs(crs),
              dict(color="deepskyblue", linewidth=1, linestyle="--", label="road map")),
             (network.polygons.to_crs(crs), dict(facecolor="orange", edgecolor="darkorange",
                                                 alpha=0.45, linewidth=0.8)),

@@ -5,27 +5,9 @@ from pathlib import Path
 from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterFeatureSink, QgsProcessingParameterNumber)
 
-from ..loading import ApplyStyle, on_load, style_path
 from .base import JobAlgorithm
-from .imagery_inputs import IMAGE_HELP, RED_BAND_HELP, imagery_parameters
-
-
-def band_arguments(algorithm, parameters, context) -> dict:
-    """The image path and the ``nir_band`` / ``red_band`` a stage's job takes (1-based, None
-    when not given), from the imagery parameters ``algorithm`` declares."""
-    arguments = {"image_path": algorithm.parameterAsRasterLayer(parameters, "IMAGE",
-                                                                context).source()}
-    for name, keyword in (("NIR_BAND", "nir_band"), ("RED_BAND", "red_band")):
-        if algorithm.parameterDefinition(name) is not None:
-            arguments[keyword] = algorithm.parameterAsInt(parameters, name, context) or None
-    return arguments
-
-
-def segments_to_sink(algorithm, parameters, name: str, context, path: str, feedback) -> str:
-    """The ``segments`` layer a stage's job wrote into the sink ``name``, styled."""
-    output = algorithm.layer_to_sink(parameters, name, context, path, "segments", feedback)
-    on_load(context, output, ApplyStyle(style_path("segments")))
-    return output
+from .imagery_inputs import (IMAGE_HELP, RED_BAND_HELP, image_arguments, imagery_parameters,
+                             segments_to_sink)
 
 
 class ImageSegmentation(JobAlgorithm):
@@ -84,7 +66,7 @@ class ImageSegmentation(JobAlgorithm):
         with tempfile.TemporaryDirectory(prefix="gisroads-segments-") as folder:
             path = str(Path(folder) / "segments.gpkg")
             result = self.run_job(dict(
-                **band_arguments(self, parameters, context), segments_path=path,
+                **image_arguments(self, parameters, context), segments_path=path,
                 n_segments=self.parameterAsInt(parameters, "N_SEGMENTS", context),
                 n_superpixels=self.parameterAsInt(parameters, "N_SUPERPIXELS", context),
                 ndvi_threshold=self.parameterAsDouble(parameters, "NDVI_THRESHOLD", context),

@@ -1,11 +1,11 @@
 """What the imagery algorithms (Grote & Rottensteiner) share: the image, segment, band and DSM
 inputs, declared in one place and read back in one place, and the segment polygon output.
-
-The declarations import nothing of gisroads (the job algorithms declare their parameters
-with them in a QGIS without it); the readers import it when they run."""
-from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingParameterBand,
+QGIS alone: the stages run in a QGIS without gisroads' packages too."""
+from qgis.core import (QgsProcessing, QgsProcessingParameterBand,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
                        QgsProcessingParameterRasterLayer)
+
+from ..loading import ApplyStyle, on_load, style_path
 
 # band parameter: keyword of the gisroads functions that take it
 BANDS = {"NIR_BAND": "nir_band", "RED_BAND": "red_band"}
@@ -51,45 +51,16 @@ def band_options(algorithm, parameters, context) -> dict:
             if algorithm.parameterDefinition(name) is not None}
 
 
-def read_raster_input(algorithm, parameters, name: str, context):
-    """The GeoRaster of raster parameter ``name``, None when an optional one is not given.
-    Raises RasterError: read it inside ``gisroads_errors()``."""
-    from gisroads.io.raster import read_raster
-
-    layer = algorithm.parameterAsRasterLayer(parameters, name, context)
-    return None if layer is None else read_raster(layer.source())
+def image_arguments(algorithm, parameters, context) -> dict:
+    """The IMAGE's path and its ``nir_band`` / ``red_band``, as a stage's job takes them."""
+    return {"image_path": algorithm.parameterAsRasterLayer(parameters, "IMAGE",
+                                                           context).source(),
+            **band_options(algorithm, parameters, context)}
 
 
-def read_segment_labels(algorithm, parameters, context, feedback, burn) -> tuple:
-    """``(image, dsm, labels)``: the IMAGE and DSM rasters (dsm None when not given) and the
-    SEGMENTS polygons burnt into labels on the image's grid by ``burn(segments, image,
-    id_column=...)`` with their ID_FIELD (segment_id when empty)."""
-    from ..convert import gisroads_errors, source_to_frame
-
-    segments = source_to_frame(algorithm.parameterAsSource(parameters, "SEGMENTS", context),
-                               feedback)
-    id_field = (algorithm.parameterAsFields(parameters, "ID_FIELD", context)
-                or ["segment_id"])[0]
-    with gisroads_errors():
-        image = read_raster_input(algorithm, parameters, "IMAGE", context)
-        dsm = read_raster_input(algorithm, parameters, "DSM", context)
-        labels = burn(segments, image, id_column=id_field)
-    if (labels < 0).all():
-        raise QgsProcessingException(algorithm.tr("no segment polygon overlaps the image"))
-    return image, dsm, labels
-
-
-def write_segments(algorithm, parameters, name, context, frame, feedback) -> str:
-    """Segments into a polygon sink (one MultiPolygon type for all), styled as segments."""
-    import geopandas as gpd
-    import shapely
-
-    from ..convert import frame_to_sink, style_on_load
-
-    parts, owner = shapely.get_parts(frame.geometry.values, return_index=True)
-    frame = frame.set_geometry(gpd.GeoSeries(shapely.multipolygons(parts, indices=owner),
-                                             index=frame.index, crs=frame.crs))
-    output = frame_to_sink(algorithm, parameters, name, context, frame, "MultiPolygon",
-                           feedback)
-    style_on_load(context, output, "segments")
+def segments_to_sink(algorithm, parameters, name: str, context, path: str, feedback) -> str:
+    """The ``segments`` layer a stage's job wrote to ``path`` into the sink ``name``,
+    styled as segments."""
+    output = algorithm.layer_to_sink(parameters, name, context, path, "segments", feedback)
+    on_load(context, output, ApplyStyle(style_path("segments")))
     return output

@@ -9,8 +9,8 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingOu
 
 from ..loading import ApplyStyle, on_load, style_path
 from .base import JobAlgorithm
-from .image_segmentation import band_arguments, segments_to_sink
-from .imagery_inputs import IMAGE_HELP, RED_BAND_HELP, imagery_parameters
+from .imagery_inputs import (IMAGE_HELP, RED_BAND_HELP, image_arguments, imagery_parameters,
+                             segments_to_sink)
 
 # parameter: (label, criteria key and index for (min, max) pairs, help)
 THRESHOLDS = {
@@ -148,7 +148,7 @@ class RoadPartFiltering(JobAlgorithm):
         with tempfile.TemporaryDirectory(prefix="gisroads-roadparts-") as folder:
             path = str(Path(folder) / "road_parts.gpkg")
             result = self.run_job(dict(
-                **band_arguments(self, parameters, context),
+                **image_arguments(self, parameters, context),
                 segments=self.source_path(parameters, "SEGMENTS", context, feedback),
                 road_parts_path=path,
                 id_field=(self.parameterAsFields(parameters, "ID_FIELD", context)

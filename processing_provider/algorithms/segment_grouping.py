@@ -7,8 +7,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingPa
                        QgsProcessingParameterFeatureSink, QgsProcessingParameterNumber)
 
 from .base import JobAlgorithm
-from .image_segmentation import band_arguments, segments_to_sink
-from .imagery_inputs import imagery_parameters
+from .imagery_inputs import image_arguments, imagery_parameters, segments_to_sink
 
 # criterion: (label, help); each gets a "poor" and a "very good" limit parameter
 LIMITS = {
@@ -93,7 +92,7 @@ class SegmentGrouping(JobAlgorithm):
         with tempfile.TemporaryDirectory(prefix="gisroads-grouping-") as folder:
             path = str(Path(folder) / "grouped.gpkg")
             result = self.run_job(dict(
-                **band_arguments(self, parameters, context),
+                **image_arguments(self, parameters, context),
                 segments=self.source_path(parameters, "SEGMENTS", context, feedback),
                 grouped_path=path,
                 id_field=(self.parameterAsFields(parameters, "ID_FIELD", context)

@@ -9,8 +9,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
 
 from ..loading import ApplyStyle, on_load, style_path
 from .base import JobAlgorithm
-from .image_segmentation import band_arguments
-from .imagery_inputs import imagery_parameters
+from .imagery_inputs import image_arguments, imagery_parameters
 
 
 class SubgraphLinking(JobAlgorithm):
@@ -106,7 +105,7 @@ class SubgraphLinking(JobAlgorithm):
         edited = self.parameterAsSource(parameters, "EDITED_GAP_EDGES", context)
         with tempfile.TemporaryDirectory(prefix="gisroads-linking-") as folder:
             path = str(Path(folder) / "linked.gpkg")
-            bands = band_arguments(self, parameters, context) if image is not None else {}
+            bands = image_arguments(self, parameters, context) if image is not None else {}
             result = self.run_job(dict(
                 bands, road_parts=self.source_path(parameters, "ROAD_PARTS", context,
                                                    feedback),
