@@ -146,6 +146,7 @@ from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..io.las import (BRIDGE_DECK_CLASS, GROUND_CLASS, NOISE_CLASSES, NOT_ROAD_CLASSES,
                       ROAD_SURFACE_CLASS, PointCloud)
+from ..progress import Progress, report
 from .intensity import auto_cell_m, image_grid, split_share
 
 FILL_SIGMA_M = 16.0
@@ -569,7 +570,8 @@ def _cell_grid(x: np.ndarray, y: np.ndarray, bounds, cell_m: float | None) -> tu
 def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None,
                   rule: EvidenceRule = EvidenceRule(), use_classification: bool = True,
                   ground_tolerance_m: float = 0.25,
-                  references: EvidenceReferences | None = None) -> RoadEvidence:
+                  references: EvidenceReferences | None = None,
+                  progress: Progress = None) -> RoadEvidence:
     """Road likelihood per cell of the lowest surface of a point cloud.
 
     Cues, their memberships and the rule that combines them: see the module docstring.
@@ -591,6 +593,9 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
         Without a classification, returns within this of the terrain are ground, metres.
     references : EvidenceReferences, optional
         Normalise by these rather than by what this cloud measures (tiles of one file).
+    progress : callable, optional
+        ``progress(fraction, message)`` at each cue; may raise
+        :class:`gisroads.progress.Cancelled`.
 
     Returns
     -------
@@ -617,6 +622,7 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
 
     used, missing, measures, memberships = {}, {}, {}, {}
 
+    report(progress, 0.0, "terrain")
     # Terrain and the returns of the lowest surface.
     if classified:
         deck = inside & (classes == BRIDGE_DECK_CLASS)
@@ -650,6 +656,7 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
     used["height"] = "lowest return above the terrain (" + (
         "class-2 ground" if classified else "morphological filter") + ")"
 
+    report(progress, 0.3, "height, density and pulses")
     # density of the ground returns, relative to the open ground
     density = _smooth(n_ground, sigma_plane) / cell_m ** 2
     open_density = (references.open_density if references is not None else
@@ -677,6 +684,7 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
     else:
         missing["pulses"] = "no pulse density"
 
+    report(progress, 0.45, "ground planes")
     # roughness and slope: a plane fitted to the ground returns in the plane window
     residual, gradient = _ground_planes(
         xyz - [transform.c, transform.f, np.median(z[ground]) if ground.any() else 0.0],
@@ -693,6 +701,7 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
     used["roughness"] = f"plane residual above the noise floor {floor * 100:.1f} cm"
     used["slope"] = "plane gradient"
 
+    report(progress, 0.7, "intensity, returns and classes")
     # intensity of the ground returns
     relative, text, bright, share = _ground_intensity(
         cloud, ground, cell, occupied, references,
@@ -724,6 +733,7 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
             = _class_membership(classes, inside & (height <= rule.height_m[1]),
                                 lambda points: _smooth(grid(None, points), sigma_local))
 
+    report(progress, 0.85, "kerbs and the rule")
     # kerbs: medians and islands between two carriageways, on the likelihood of the others
     if cell_m > 1.0:
         missing["kerbs"] = f"cells of {cell_m:.2f} m cannot resolve a kerb (at most 1 m)"
@@ -745,6 +755,7 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
     def raster(array):
         return GeoRaster(np.asarray(array, np.float32), transform, cloud.crs, nodata=np.nan)
 
+    report(progress, 1.0, "road evidence")
     return RoadEvidence(
         likelihood=raster(likelihood),
         memberships={k: raster(np.where(footprint, v, np.nan)) for k, v in memberships.items()},

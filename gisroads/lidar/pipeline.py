@@ -275,7 +275,7 @@ def _tile_result_path(job: _TileJob, tile: Tile) -> Path:
     return job.results / f"tile_{tile.row}_{tile.col}.pkl"
 
 
-def _run_tile(job: _TileJob, tile: Tile):
+def _run_tile(job: _TileJob, tile: Tile, progress: Progress = None):
     """``(reused, result)`` of one tile: :class:`_Finished` of its :class:`TileRoads`
     (intensity cue) or ``(likelihood, vehicle and dropout cells, references, used,
     missing)`` (evidence cue), None for a tile with fewer than ``min_points`` points. A
@@ -292,7 +292,7 @@ def _run_tile(job: _TileJob, tile: Tile):
             result = extract_tile(cloud, tile, **job.options)
         else:
             evidence = road_evidence(cloud, bounds=tile.bounds, references=job.references,
-                                     **job.options)
+                                     progress=progress, **job.options)
             raster = (evidence.likelihood if job.model is None
                       else learned_likelihood(evidence, _evidence_model(job.model)))
             intensity = evidence.measures.get("intensity")
@@ -350,9 +350,10 @@ def _results_folder(store: TileStore, work_dir, cue: str, options: dict) -> Path
 
 
 def _run_tiles(job: _TileJob, tiles: list[Tile], *, workers: int, scheduler, progress,
-               run: dict) -> list:
+               run: dict, tile_progress: Progress = None) -> list:
     """What the driver gets of ``tiles`` (:func:`_for_driver`), in their order
-    (:func:`gisroads.parallel.for_each_result`)."""
+    (:func:`gisroads.parallel.for_each_result`); ``tile_progress`` reports inside the one
+    tile the driver runs itself (not picklable: for one tile, one worker)."""
     results = [None] * len(tiles)
     reused = 0
 
@@ -360,7 +361,8 @@ def _run_tiles(job: _TileJob, tiles: list[Tile], *, workers: int, scheduler, pro
         nonlocal reused
         reused += outcome[0]
         results[i] = outcome[1]
-    for_each_result(partial(_run_tile, job), tiles, arrived, workers=workers,
+    for_each_result(partial(_run_tile, job, progress=tile_progress), tiles, arrived,
+                    workers=workers,
                     scheduler=scheduler, progress=progress)
     run["tiles"] = run.get("tiles", 0) + len(tiles)
     run["reused"] = run.get("reused", 0) + reused
@@ -436,9 +438,10 @@ def _evidence_from_store(store: TileStore, *, cell_m, min_points, workers, sched
     # the first tile with enough points gives the references every other tile is scaled by
     results, first = [], len(tiles)
     for i, tile in enumerate(tiles):
-        report(progress, 0.0, f"tile {i + 1} of {len(tiles)}: references")
+        report(progress, i / len(tiles), f"tile {i + 1} of {len(tiles)}: references")
         results.append(_run_tiles(job, [tile], workers=1, scheduler=None, progress=None,
-                                  run=run)[0])
+                                  run=run, tile_progress=scaled(
+                                      progress, i / len(tiles), (i + 1) / len(tiles)))[0])
         if results[-1] is not None:
             first = i + 1
             break
