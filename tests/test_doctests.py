@@ -22,6 +22,7 @@ MODULES = [
     "gisroads.io.raster",
     "gisroads.io.vector",
     "gisroads.lidar.blocks",
+    "gisroads.lidar.intensity",
     "gisroads.lidar.pipeline",
     "gisroads.network.rasters",
     "gisroads.snakes.pipeline",

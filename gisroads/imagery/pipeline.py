@@ -171,8 +171,12 @@ def image_threshold(probability: GeoRaster, threshold: float) -> float:
 
     Examples
     --------
+    >>> import numpy as np
     >>> from affine import Affine
-    >>> sure = GeoRaster(np.r_[np.zeros(90), np.ones(10)].reshape(10, 10), Affine.identity(), None)
+    >>> from gisroads.geo import GeoRaster
+    >>> from gisroads.imagery.pipeline import image_threshold
+    >>> sure = GeoRaster(np.r_[np.zeros(90), np.ones(10)].reshape(10, 10), Affine.identity(),
+    ...                  None)
     >>> image_threshold(sure, 0.45)
     0.45
     >>> unsure = GeoRaster(sure.data * 0.5, sure.transform, None)

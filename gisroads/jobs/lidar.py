@@ -23,7 +23,7 @@ from ..lidar.blocks import (MAX_EDGE_M, MIN_BLOCK_AREA_M2, ROAD_FRACTION, SAMPLE
 from ..lidar.ground import ground_planes
 from ..lidar.hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, T_BD, T_INT,
                                 likelihood_maps, road_hypotheses)
-from ..lidar.intensity import write_intensity_images
+from ..lidar.intensity import data_extent, write_intensity_images
 from ..lidar.mincover import A, D_MAX, SEED_STEP_M, exact_min_cover, greedy_min_cover
 from ..lidar.roads import rectangles_to_roads
 from ..lidar.learned import save_evidence_model
@@ -203,6 +203,11 @@ def _write_tiles(roads: TiledRoads, out_path, rasters: Path | None, *, tile_maps
                 write_geotiff(rasters / f"{name}_intensity.tif", tile.intensity,
                               band_names=levels)
                 for k, maps in enumerate(tile.likelihood):
+                    # NaN past the cloud: city blocks and other readers see where it ends
+                    inside = data_extent(tile.intensity.data[k],
+                                         cell_m=tile.intensity.pixel_size)
+                    maps = GeoRaster(np.where(inside, maps.data, np.float32(np.nan)),
+                                     maps.transform, maps.crs)
                     write_geotiff(rasters / f"{name}_likelihood_level_{k}.tif", maps,
                                   band_names=[f"width_{w:g}_m" for w in widths_m])
         report(progress, 1.0, "writing the layers")

@@ -258,6 +258,37 @@ def fill_holes(image: np.ndarray, *, radius_cells: float) -> np.ndarray:
     return filled
 
 
+def data_extent(image: np.ndarray, *, cell_m: float, reach_m: float = 2.0) -> np.ndarray:
+    """Cells inside what the cloud covers: those within ``reach_m`` (metres) of a cell with
+    data, and every area they enclose (buildings, water); not the empty margin of a tile
+    past the cloud's edge.
+
+    Parameters
+    ----------
+    image : ndarray, shape (rows, cols)
+        NaN where a cell has no data (an intensity image's level).
+    cell_m : float
+        Cell side, metres.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from gisroads.lidar.intensity import data_extent
+    >>> image = np.full((6, 8), np.nan)
+    >>> image[:, :4] = 1.0; image[2:4, 1:3] = np.nan   # a building inside, a margin right
+    >>> data_extent(image, cell_m=1.0, reach_m=1.0).astype(int)
+    array([[1, 1, 1, 1, 1, 0, 0, 0],
+           [1, 1, 1, 1, 1, 0, 0, 0],
+           [1, 1, 1, 1, 1, 0, 0, 0],
+           [1, 1, 1, 1, 1, 0, 0, 0],
+           [1, 1, 1, 1, 1, 0, 0, 0],
+           [1, 1, 1, 1, 1, 0, 0, 0]])
+    """
+    valid = np.isfinite(image)
+    near = ndimage.distance_transform_edt(~valid) * cell_m <= reach_m
+    return ndimage.binary_fill_holes(near)
+
+
 def _steps_to_data(data: np.ndarray, step: tuple[int, int], longest: int) -> np.ndarray:
     """Steps of ``(d_row, d_col)`` from every cell to the nearest data cell that way;
     ``longest + 1`` where there is none within ``longest`` steps."""

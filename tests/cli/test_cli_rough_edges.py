@@ -297,3 +297,22 @@ def test_the_last_count_in_the_progress_is_the_summarys(lidar_dir, tmp_path):
     inside = [e["progress"] for e in events[first:last + 1]]
     assert {"terrain", "ground planes", "kerbs and the rule"} <= set(messages[first:last])
     assert max(np.diff(inside)) < 0.15
+
+
+def test_city_blocks_end_where_the_cloud_ends(lidar_dir, tmp_path):
+    """fusa covers 250 x 250 m of its 300 m tile: the blocks drew the empty 50 m margin
+    too. The likelihood rasters are NaN past the cloud now."""
+    done = gisroads("lidar", lidar_dir / "fusa.laz", "-o", tmp_path / "r.gpkg", "--cue",
+                    "intensity", "--rasters", tmp_path / "rasters")
+    assert done.returncode == 0, done.stderr
+    likelihood = tmp_path / "rasters" / "tile_r0_c0_likelihood_level_0.tif"
+    with rasterio.open(likelihood) as source:
+        assert source.bounds.right - source.bounds.left == 300.0
+        margin = source.read(1)[:, -60:]            # the tile's 30 m east of the cloud
+    assert np.isnan(margin).all()
+    done = gisroads("blocks", likelihood, "-o", tmp_path / "blocks.gpkg")
+    assert done.returncode == 0, done.stderr
+    blocks = gpd.read_file(tmp_path / "blocks.gpkg", layer="city_blocks")
+    x0, y0, x1, y1 = blocks.total_bounds
+    assert len(blocks) >= 3
+    assert x1 <= 278000.0 + 3.0 and y1 <= 6122500.0 + 3.0  # the cloud's east and north edges
