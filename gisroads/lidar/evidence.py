@@ -164,6 +164,11 @@ LANE_RADIUS_M = 1.5
 #: Paved cells between two carriageways form a median's band when at least this long
 #: (bounding-box diagonal), metres: shorter bands are notches of a carriageway's edge.
 MEDIAN_LENGTH_M = 5.0
+CARRIAGEWAY_SPAN_M = 8.0
+CARRIAGEWAY_DEPTH_M = (0.06, 0.03)
+CARRIAGEWAY_TOO_DEEP_M = (0.25, 0.40)
+CARRIAGEWAY_LENGTH_M = 40.0
+TROUGH_SMOOTHING_M = 0.5
 
 @dataclass(frozen=True)
 class EvidenceRule:
@@ -402,6 +407,96 @@ def kerb_steps(ground_low: np.ndarray, cell_m: float, *, sigma_m: float = 0.5,
     steps = np.hypot(gx, gy)
     steps[~(weight > 0.3)] = np.nan
     return steps
+
+
+def carriageway_troughs(ground_low: np.ndarray, no_returns: np.ndarray, cell_m: float, *,
+                        span_m: float = CARRIAGEWAY_SPAN_M,
+                        depth_m: tuple[float, float] = CARRIAGEWAY_DEPTH_M,
+                        too_deep_m: tuple[float, float] = CARRIAGEWAY_TOO_DEEP_M,
+                        min_length_m: float = CARRIAGEWAY_LENGTH_M) -> np.ndarray:
+    """Membership of the cells of carriageways between kerbs, whatever their surface.
+
+    A carriageway with kerbs is a long trough of the ground surface, a kerb's height below
+    the footways on both sides. The lowest ground return per cell (buildings' cells filled
+    with the nearest ground) is closed with a disk of diameter ``span_m`` (a grey closing
+    fills every trough narrower than it) after smoothing at :data:`TROUGH_SMOOTHING_M` and
+    taking out the trend at ``span_m`` (Gaussian sigma: a slope or a street's crossfall would
+    leave only the part below the lower rim); areas without any return at least 2 m across
+    inside the cloud's convex hull (water: a canal, a pond) stand as walls, so a street
+    along a quay is a trough too. The
+    depth of each cell below the closed surface ramps in over ``depth_m`` and out over
+    ``too_deep_m`` (ditches, steps of terrain); troughs shorter than ``min_length_m`` (their
+    longest axis) are dropped.
+
+    Parameters
+    ----------
+    ground_low : ndarray, shape (rows, cols)
+        Lowest ground return per cell, metres; NaN without one.
+    no_returns : ndarray of bool, shape (rows, cols)
+        Cells without any return.
+    cell_m : float
+        Cell side, metres.
+    span_m : float
+        Widest carriageway, metres.
+    depth_m, too_deep_m : (full, none)
+        Ramps of the depth below the closed surface, metres.
+    min_length_m : float
+        Shortest carriageway, metres.
+
+    Returns
+    -------
+    ndarray of float
+        Membership in [0, 1].
+    """
+    from skimage.measure import regionprops_table
+    from skimage.morphology import convex_hull_image
+
+    known = np.isfinite(ground_low)
+    out = np.zeros(ground_low.shape)
+    if known.sum() < 2:
+        return out
+    # the closing lifts to the ranging noise's highs: smooth it away first
+    sigma = max(TROUGH_SMOOTHING_M, cell_m) / cell_m
+    ground = _fill_nearest(_ratio(_smooth(np.where(known, ground_low, 0.0), sigma),
+                                  _smooth(known.astype(float), sigma)))
+    # walls are open water inside the cloud, not the odd cell that no pulse hit nor the
+    # empty margin of a tile past the cloud's edge
+    walls = (ndimage.binary_opening(no_returns & ~known, structure=_disk(1.0 / cell_m))
+             & convex_hull_image(~no_returns))
+    # the street's crossfall and the terrain's slope out: a flat disk closes to the lower rim
+    land = (known & ~walls).astype(float)
+    trend = _fill_nearest(_ratio(_smooth(np.where(land > 0, ground, 0.0), span_m / cell_m),
+                                 _smooth(land, span_m / cell_m)))
+    detail = ground - trend
+    surface = np.where(walls, np.nanmax(np.abs(detail)) + 10.0, detail)
+    closed = ndimage.grey_closing(surface, footprint=_disk(span_m / 2 / cell_m))
+    depth = closed - detail
+    member = np.where(known, ramp(depth, *depth_m) * ramp(depth, *too_deep_m), 0.0)
+    band = ndimage.binary_opening(member >= 0.5, structure=_disk(0.5 / cell_m))
+    labels, count = ndimage.label(band)
+    if count == 0:
+        return out
+    props = regionprops_table(labels, properties=("label", "axis_major_length"))
+    long = np.zeros(count + 1, bool)
+    long[props["label"]] = props["axis_major_length"] * cell_m >= min_length_m
+    return np.where(long[labels], member, 0.0)
+
+
+def _lift_carriageways(memberships: dict, measures: dict, ground_low: np.ndarray,
+                       no_returns: np.ndarray, cell_m: float) -> None:
+    """Add the ``carriageway`` membership and measure (:func:`carriageway_troughs` on a
+    smooth, single-return surface, not a forest floor's; the measure is the trough
+    membership before that condition) and raise the ``intensity`` membership to it: a
+    street between kerbs is paved whatever it is paved with."""
+    smooth = memberships["roughness"] >= 1.0
+    if "returns" in memberships:
+        smooth &= np.nan_to_num(memberships["returns"], nan=1.0) >= 1.0
+    measures["carriageway"] = carriageway_troughs(ground_low, no_returns, cell_m)
+    carriageway = np.where(smooth, measures["carriageway"], 0.0)
+    memberships["carriageway"] = carriageway
+    memberships["intensity"] = np.where(carriageway > 0,
+                                        np.fmax(memberships["intensity"], carriageway),
+                                        memberships["intensity"])
 
 
 def median_cells(paved: np.ndarray, kerb: np.ndarray, cell_m: float, *,
@@ -738,10 +833,14 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
     if cell_m > 1.0:
         missing["kerbs"] = f"cells of {cell_m:.2f} m cannot resolve a kerb (at most 1 m)"
     else:
-        steps = kerb_steps(_cell_min(cell[ground], z[ground], size).reshape(rows, cols),
-                           cell_m)
+        ground_low = _cell_min(cell[ground], z[ground], size).reshape(rows, cols)
+        steps = kerb_steps(ground_low, cell_m)
         measures["kerbs"] = steps
         used["kerbs"] = f"medians between carriageways (ground steps >= {KERB_GRADIENT})"
+        if "intensity" in memberships:
+            _lift_carriageways(memberships, measures, ground_low, ~occupied, cell_m)
+            used["carriageway"] = ("troughs between kerbs (any surface): their intensity "
+                                   "need not be asphalt's")
 
     likelihood = _combined_likelihood(memberships, rule, (rows, cols))
     if "kerbs" in measures:
@@ -774,6 +873,9 @@ CAR_PARK_FLANK_SHARE = 0.15
 #: A road whose flanks are at least this share pulse dropouts (:func:`dropout_cells`) is a
 #: shore or the rim of a clearing around a pond (:func:`without_flanked_roads`).
 SHORE_FLANK_SHARE = 0.1
+#: A carriageway's flank reaches 0.5 + 5 m past its edge (:func:`flank_share`): water that
+#: near a kerbed carriageway is a canal beside a street, metres (:func:`dropout_cells`).
+QUAY_M = 6.0
 
 
 def vehicle_cells(evidence: RoadEvidence, *, height_m: tuple[float, float] = VEHICLE_HEIGHT_M,
@@ -867,11 +969,14 @@ def vehicle_flank_share(centrelines, vehicles: GeoRaster, **options) -> np.ndarr
 
 
 def dropout_cells(evidence: RoadEvidence, *,
-                  max_pulses: float = EvidenceRule().pulses[1]) -> GeoRaster:
+                  max_pulses: float = EvidenceRule().pulses[1],
+                  quay_m: float = QUAY_M) -> GeoRaster:
     """Cells where most pulses came back with no return: water, a data gap.
 
     The ``pulses`` measure (first returns per m2 over the cloud's median) is at most
-    ``max_pulses`` (the none end of the ``pulses`` ramp: under 15 % of the pulses).
+    ``max_pulses`` (the none end of the ``pulses`` ramp: under 15 % of the pulses). Water
+    within ``quay_m`` (metres) of a carriageway between kerbs (the ``carriageway`` cue) is
+    left out: a street along a canal is a street, the rim of a pond is not.
 
     Returns
     -------
@@ -887,6 +992,11 @@ def dropout_cells(evidence: RoadEvidence, *,
         m = np.asarray(measure.data, np.float64)
         with np.errstate(invalid="ignore"):
             out = np.where(np.isfinite(m), (m <= max_pulses).astype(float), np.nan)
+        lanes = evidence.memberships.get("carriageway")
+        if lanes is not None and (np.nan_to_num(lanes.data) >= 0.5).any():
+            quay = ndimage.distance_transform_edt(~(np.nan_to_num(lanes.data) >= 0.5)) \
+                * evidence.cell_m <= quay_m
+            out[quay & np.isfinite(out)] = 0.0
     return GeoRaster(np.asarray(out, np.float32), raster.transform, raster.crs, nodata=np.nan)
 
 

@@ -74,7 +74,8 @@ def test_likelihood_separates_the_roads_of_a_synthetic_scene(scene_cloud):
     # measured 0.948
     assert auc_against(evidence, truth) > 0.92
     assert set(evidence.used) == {"height", "density", "pulses", "roughness", "slope",
-                                  "intensity", "returns", "classification", "kerbs"}
+                                  "intensity", "returns", "classification", "kerbs",
+                                  "carriageway"}
     assert evidence.missing == {}
     for name, member in evidence.memberships.items():
         assert member.shape == evidence.likelihood.shape, name
@@ -273,8 +274,14 @@ def test_pulse_dropouts_are_no_road_and_the_edge_of_the_data_is_not_a_dropout(sc
     assert np.nanmax(wet.likelihood.data[inner]) < 0.8
     assert np.nanpercentile(wet.likelihood.data[inner], 99) < 0.1
     road = rasterise(truth, wet.likelihood)
-    np.testing.assert_allclose(wet.likelihood.data[outer & road],
-                               whole.likelihood.data[outer & road], atol=1e-6)
+    # away from the pond the roads keep their likelihood; the carriageway troughs see the
+    # ground's shape over 8 m and keep bands 40 m long, so a trough the pond cuts short may
+    # change a little further out (measured: 28 of 69,293 cells, at most 28 m from the
+    # pond's edge)
+    changed = outer & road & ~(np.abs(np.nan_to_num(wet.likelihood.data)
+                                      - np.nan_to_num(whole.likelihood.data)) <= 1e-6)
+    assert changed.sum() <= 0.001 * (outer & road).sum()
+    assert (np.abs(cx[changed] - 150) < 70).all() and (np.abs(cy[changed] - 150) < 70).all()
     # the edge of the data: the pulse density there is the cloud's, not half of it
     pulses = whole.measures["pulses"].data
     edge = np.zeros(pulses.shape, bool)
