@@ -272,9 +272,13 @@ def read_layer(path, layer: str | None = None, *, crs=None) -> gpd.GeoDataFrame:
     path = Path(path)
     if not path.exists():
         raise MissingFileError(f"{path}: no such file")
-    if layer is None and path.suffix.lower() == ".gpkg":
+    if path.suffix.lower() == ".gpkg":
         names = list_layers(path)
-        layer = "road_centrelines" if "road_centrelines" in names else names[0]
+        if layer is None:
+            layer = "road_centrelines" if "road_centrelines" in names else names[0]
+        elif layer not in names:
+            raise GisroadsError(f"{path}: no layer {layer!r} (its layers: "
+                                f"{', '.join(names)})")
     try:
         frame = gpd.read_file(path, layer=layer) if layer else gpd.read_file(path)
     except Exception as err:  # noqa: BLE001  (pyogrio's and Fiona's errors share no base)

@@ -11,7 +11,8 @@ from qgis.core import (QgsFeatureSink, QgsProcessing, QgsProcessingAlgorithm,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterFolderDestination, QgsProcessingParameterNumber,
-                       QgsProcessingParameterRasterLayer, QgsVectorLayer)
+                       QgsProcessingParameterPointCloudLayer,
+                       QgsProcessingParameterRasterLayer, QgsProviderRegistry, QgsVectorLayer)
 from qgis.PyQt.QtCore import QCoreApplication
 
 
@@ -181,12 +182,36 @@ def show_decimals(parameter) -> None:
         parameter.setMetadata(metadata)
 
 
-def cloud_input(tr, text: str) -> QgsProcessingParameterFile:
-    """The LAS/LAZ point cloud parameter ``INPUT``."""
-    param = QgsProcessingParameterFile("INPUT", tr("Point cloud (LAS/LAZ)"),
-                                       fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)")
+def reads_point_clouds() -> bool:
+    """Whether this QGIS opens LAS/LAZ files as point-cloud layers (its PDAL provider;
+    Debian's QGIS 3.22 is built without it)."""
+    return "pdal" in QgsProviderRegistry.instance().providerList()
+
+
+def cloud_input(tr, text: str):
+    """The LAS/LAZ point cloud parameter ``INPUT``: a point-cloud layer of the project
+    where QGIS can open one (:func:`reads_point_clouds`), a file otherwise."""
+    if reads_point_clouds():
+        param = QgsProcessingParameterPointCloudLayer("INPUT", tr("Point cloud (LAS/LAZ)"))
+    else:
+        param = QgsProcessingParameterFile("INPUT", tr("Point cloud (LAS/LAZ)"),
+                                           fileFilter="LAS/LAZ (*.las *.laz *.LAS *.LAZ)")
     param.setHelp(tr(text))
     return param
+
+
+def cloud_path(algorithm, parameters, context) -> str:
+    """The file of the point cloud ``INPUT`` (:func:`cloud_input`), a layer's or a path's."""
+    if isinstance(algorithm.parameterDefinition("INPUT"), QgsProcessingParameterFile):
+        return algorithm.parameterAsFile(parameters, "INPUT", context)
+    layer = algorithm.parameterAsPointCloudLayer(parameters, "INPUT", context)
+    if layer is None:
+        raise QgsProcessingException(f"INPUT: {parameters.get('INPUT')!r} is no point "
+                                     "cloud that this QGIS can open")
+    if not layer.source().lower().endswith((".las", ".laz")):
+        raise QgsProcessingException(f"{layer.name()}: gisroads reads LAS and LAZ files; "
+                                     f"this layer is {layer.source()}")
+    return layer.source()
 
 
 def road_map_input(tr) -> QgsProcessingParameterFeatureSource:

@@ -2,7 +2,7 @@
 from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination)
 
-from .base import JobAlgorithm, cloud_input, road_map_input
+from .base import JobAlgorithm, cloud_input, cloud_path, road_map_input
 
 DETECTORS = ("exp", "step", "none")
 
@@ -63,7 +63,7 @@ class CurbAttractorMap(JobAlgorithm):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
         self.run_job(dict(
-            cloud_path=self.parameterAsFile(parameters, "INPUT", context),
+            cloud_path=cloud_path(self, parameters, context),
             map_source=self.source_path(parameters, "MAP", context, feedback), out_path=out,
             curb_detector=DETECTORS[self.parameterAsEnum(parameters, "DETECTOR", context)],
             cell_m=self.parameterAsDouble(parameters, "CELL", context),

@@ -58,6 +58,17 @@ def image_arguments(algorithm, parameters, context) -> dict:
             **band_options(algorithm, parameters, context)}
 
 
+def segment_arguments(algorithm, parameters, context, feedback) -> dict:
+    """The image (:func:`image_arguments`), the SEGMENTS as a file with their ID_FIELD and
+    the DSM's path, as the grouping and road-part stages' jobs take them."""
+    dsm = algorithm.parameterAsRasterLayer(parameters, "DSM", context)
+    return {**image_arguments(algorithm, parameters, context),
+            "segments": algorithm.source_path(parameters, "SEGMENTS", context, feedback),
+            "id_field": (algorithm.parameterAsFields(parameters, "ID_FIELD", context)
+                         or ["segment_id"])[0],
+            "dsm_path": None if dsm is None else dsm.source()}
+
+
 def segments_to_sink(algorithm, parameters, name: str, context, path: str, feedback) -> str:
     """The ``segments`` layer a stage's job wrote to ``path`` into the sink ``name``,
     styled as segments."""

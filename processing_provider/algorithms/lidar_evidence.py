@@ -3,7 +3,7 @@ paper)."""
 from qgis.core import (QgsProcessingOutputNumber, QgsProcessingOutputString,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination)
 
-from .base import JobAlgorithm, cloud_input
+from .base import JobAlgorithm, cloud_input, cloud_path
 
 
 class LidarRoadEvidence(JobAlgorithm):
@@ -51,7 +51,7 @@ class LidarRoadEvidence(JobAlgorithm):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
         result = self.run_job(dict(
-            cloud_path=self.parameterAsFile(parameters, "INPUT", context), out_path=out,
+            cloud_path=cloud_path(self, parameters, context), out_path=out,
             cell_m=(self.parameterAsDouble(parameters, "CELL", context)
                     if parameters.get("CELL") not in (None, "") else None),
             tile_m=self.parameterAsDouble(parameters, "TILE", context),

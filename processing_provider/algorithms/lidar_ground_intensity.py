@@ -2,7 +2,7 @@
 from qgis.core import (QgsProcessingOutputNumber, QgsProcessingOutputRasterLayer,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination)
 
-from .base import JobAlgorithm, cloud_input
+from .base import JobAlgorithm, cloud_input, cloud_path
 
 
 class LidarGroundIntensity(JobAlgorithm):
@@ -56,7 +56,7 @@ class LidarGroundIntensity(JobAlgorithm):
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
         heights = self.parameterAsOutputLayer(parameters, "HEIGHTS", context)
         result = self.run_job(dict(
-            cloud_path=self.parameterAsFile(parameters, "INPUT", context), intensity_path=out,
+            cloud_path=cloud_path(self, parameters, context), intensity_path=out,
             heights_path=heights,
             cell_m=(self.parameterAsDouble(parameters, "CELL", context)
                     if parameters.get("CELL") not in (None, "") else None),

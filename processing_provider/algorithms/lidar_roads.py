@@ -12,8 +12,8 @@ from gisroads.parallel import default_workers
 
 from ..convert import gisroads_errors, progress_callback
 from ..loading import load_beneath_on_completion, load_geopackage_on_completion
-from .base import (GisroadsAlgorithm, background_output, cloud_input, lidar_model_input,
-                   network_output, workers_parameter)
+from .base import (GisroadsAlgorithm, background_output, cloud_input, cloud_path,
+                   lidar_model_input, network_output, workers_parameter)
 
 
 class LidarRoadNetwork(GisroadsAlgorithm):
@@ -98,7 +98,7 @@ class LidarRoadNetwork(GisroadsAlgorithm):
         tagged = self.parameterAsFileOutput(parameters, "TAGGED_LAS", context) or None
         rasters = self.parameterAsString(parameters, "RASTERS", context) or None
         background = self.parameterAsFileOutput(parameters, "BACKGROUND", context) or None
-        cloud = self.parameterAsFile(parameters, "INPUT", context)
+        cloud = cloud_path(self, parameters, context)
         with gisroads_errors(feedback):
             result = lidar_job(
                 cloud, out, tagged_las=tagged, rasters_dir=rasters, background=background,

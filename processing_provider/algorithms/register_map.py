@@ -3,7 +3,7 @@ from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFileDest
                        QgsProcessingParameterNumber)
 
 from ..loading import load_geopackage_on_completion
-from .base import JobAlgorithm, cloud_input, road_map_input
+from .base import JobAlgorithm, cloud_input, cloud_path, road_map_input
 
 
 class RegisterRoadMap(JobAlgorithm):
@@ -69,7 +69,7 @@ class RegisterRoadMap(JobAlgorithm):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
         result = self.run_job(dict(
-            cloud_path=self.parameterAsFile(parameters, "INPUT", context),
+            cloud_path=cloud_path(self, parameters, context),
             map_source=self.source_path(parameters, "MAP", context, feedback), out_path=out,
             snap_m=self.parameterAsDouble(parameters, "SNAP", context),
             control_spacing_m=self.parameterAsDouble(parameters, "CONTROL_SPACING", context),

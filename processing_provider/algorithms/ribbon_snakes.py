@@ -10,7 +10,7 @@ from gisroads.snakes.registration import SNAP_M
 
 from ..convert import gisroads_errors, progress_callback, source_to_frame
 from ..loading import load_geopackage_on_completion
-from .base import GisroadsAlgorithm, network_output, workers_parameter
+from .base import GisroadsAlgorithm, cloud_path, network_output, workers_parameter
 from .curb_attractor import DETECTORS, map_guided_parameters
 
 
@@ -22,7 +22,7 @@ def map_guided_arguments(algorithm, parameters, context, feedback) -> tuple:
         "curb_detector": DETECTORS[algorithm.parameterAsEnum(parameters, "DETECTOR", context)],
         "cell_m": algorithm.parameterAsDouble(parameters, "CELL", context),
         "snap_m": algorithm.parameterAsDouble(parameters, "SNAP", context)}
-    return algorithm.parameterAsFile(parameters, "INPUT", context), lines, options
+    return cloud_path(algorithm, parameters, context), lines, options
 
 
 class RibbonSnakeRoads(GisroadsAlgorithm):

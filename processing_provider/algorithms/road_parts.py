@@ -9,7 +9,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingOu
 
 from ..loading import ApplyStyle, on_load, style_path
 from .base import JobAlgorithm
-from .imagery_inputs import (IMAGE_HELP, RED_BAND_HELP, image_arguments, imagery_parameters,
+from .imagery_inputs import (IMAGE_HELP, RED_BAND_HELP, imagery_parameters, segment_arguments,
                              segments_to_sink)
 
 # parameter: (label, criteria key and index for (min, max) pairs, help)
@@ -144,16 +144,11 @@ class RoadPartFiltering(JobAlgorithm):
         return criteria
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        dsm = self.parameterAsRasterLayer(parameters, "DSM", context)
         with tempfile.TemporaryDirectory(prefix="gisroads-roadparts-") as folder:
             path = str(Path(folder) / "road_parts.gpkg")
             result = self.run_job(dict(
-                **image_arguments(self, parameters, context),
-                segments=self.source_path(parameters, "SEGMENTS", context, feedback),
+                **segment_arguments(self, parameters, context, feedback),
                 road_parts_path=path,
-                id_field=(self.parameterAsFields(parameters, "ID_FIELD", context)
-                          or ["segment_id"])[0],
-                dsm_path=None if dsm is None else dsm.source(),
                 criteria=self._criteria(parameters, context),
                 merge=self.parameterAsBoolean(parameters, "MERGE", context),
                 max_direction_diff_rad=math.radians(

@@ -7,7 +7,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingPa
                        QgsProcessingParameterFeatureSink, QgsProcessingParameterNumber)
 
 from .base import JobAlgorithm
-from .imagery_inputs import image_arguments, imagery_parameters, segments_to_sink
+from .imagery_inputs import imagery_parameters, segment_arguments, segments_to_sink
 
 # criterion: (label, help); each gets a "poor" and a "very good" limit parameter
 LIMITS = {
@@ -88,16 +88,11 @@ class SegmentGrouping(JobAlgorithm):
         criteria = {c: (self.parameterAsDouble(parameters, f"{c.upper()}_POOR", context),
                         self.parameterAsDouble(parameters, f"{c.upper()}_GOOD", context))
                     for c in LIMITS}
-        dsm = self.parameterAsRasterLayer(parameters, "DSM", context)
         with tempfile.TemporaryDirectory(prefix="gisroads-grouping-") as folder:
             path = str(Path(folder) / "grouped.gpkg")
             result = self.run_job(dict(
-                **image_arguments(self, parameters, context),
-                segments=self.source_path(parameters, "SEGMENTS", context, feedback),
+                **segment_arguments(self, parameters, context, feedback),
                 grouped_path=path,
-                id_field=(self.parameterAsFields(parameters, "ID_FIELD", context)
-                          or ["segment_id"])[0],
-                dsm_path=None if dsm is None else dsm.source(),
                 merge_fraction=self.parameterAsDouble(parameters, "MERGE_FRACTION", context),
                 max_iterations=self.parameterAsInt(parameters, "MAX_ITERATIONS", context),
                 criteria=criteria,

@@ -2,7 +2,7 @@
 from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFile,
                        QgsProcessingParameterFileDestination, QgsProcessingParameterNumber)
 
-from .base import JobAlgorithm, cloud_input
+from .base import JobAlgorithm, cloud_input, cloud_path
 
 
 class TagRoadPoints(JobAlgorithm):
@@ -49,7 +49,7 @@ class TagRoadPoints(JobAlgorithm):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
         result = self.run_job(dict(
-            cloud_path=self.parameterAsFile(parameters, "INPUT", context),
+            cloud_path=cloud_path(self, parameters, context),
             polygons_path=self.parameterAsFile(parameters, "POLYGONS", context), out_path=out,
             heights_path=self.parameterAsFile(parameters, "HEIGHTS", context) or None,
             tolerance_m=self.parameterAsDouble(parameters, "TOLERANCE", context)), feedback)

@@ -3,7 +3,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterField,
                        QgsProcessingParameterFileDestination, QgsProcessingParameterNumber)
 
-from .base import JobAlgorithm, cloud_input
+from .base import JobAlgorithm, cloud_input, cloud_path
 
 
 class TrainLidarRoadModel(JobAlgorithm):
@@ -58,7 +58,7 @@ class TrainLidarRoadModel(JobAlgorithm):
         if not out.lower().endswith(".npz"):
             out += ".npz"
         result = self.run_job(dict(
-            cloud_path=self.parameterAsFile(parameters, "INPUT", context),
+            cloud_path=cloud_path(self, parameters, context),
             roads_path=self.source_path(parameters, "ROADS", context, feedback),
             out_path=out,
             width_field=self.parameterAsString(parameters, "WIDTH_FIELD", context) or None,

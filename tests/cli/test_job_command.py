@@ -66,3 +66,27 @@ def test_likelihood_widths_as_text_are_checked(tmp_path):
         run_job("likelihood_job", {"intensity_path": "i.tif", "segments_path": "s.tif",
                                    "likelihood_path": "l.tif",
                                    "hypotheses_path": "h.gpkg", "widths_m": "6,-9"})
+
+
+def test_linking_refuses_an_image_in_another_crs_and_writes_nothing(tmp_path):
+    import numpy as np
+    from affine import Affine
+    from pyproj import CRS
+
+    from gisroads.geo import GeoRaster
+    from gisroads.io.raster import write_geotiff
+
+    parts = gpd.GeoDataFrame(
+        {"part_id": [0, 1], "width_m": [6.0, 6.0], "quality": [0.9, 0.9]},
+        geometry=[shapely.LineString([(0, 0), (40, 0)]), shapely.LineString([(50, 0), (90, 0)])],
+        crs="EPSG:32633")
+    parts.to_file(tmp_path / "parts.gpkg", layer="road_parts", driver="GPKG")
+    image = GeoRaster(np.zeros((3, 20, 20), np.uint8), Affine(5, 0, -5, 0, -5, 50),
+                      CRS("EPSG:32632"))
+    write_geotiff(tmp_path / "image.tif", image)
+    out = tmp_path / "linked.gpkg"
+    with pytest.raises(GisroadsError, match="image is in another CRS than the road parts"):
+        run_job("linking_job", {"road_parts": str(tmp_path / "parts.gpkg"),
+                                "image_path": str(tmp_path / "image.tif"),
+                                "linked_path": str(out)})
+    assert not out.exists()

@@ -5,6 +5,7 @@ import geopandas as gpd
 import pytest
 import shapely
 
+from gisroads.errors import GisroadsError
 from gisroads.geo import network_from_centrelines
 from gisroads.io.vector import list_layers, read_layer, write_geopackage
 from tests.road_layers import geometry_types
@@ -57,6 +58,9 @@ def test_read_layer_reprojects_and_refuses_bad_paths(tmp_path):
     assert wgs.crs.to_epsg() == 4326 and wgs.geometry.y.iloc[0] < 0  # UTM 54 south
     with pytest.raises(FileNotFoundError):
         read_layer(tmp_path / "none.gpkg")
+    with pytest.raises(GisroadsError, match=r"no layer 'streets' \(its layers: "
+                                            r"road_centrelines, road_polygons, junctions\)"):
+        read_layer(path, "streets")
     with pytest.raises(ValueError, match=".gpkg"):
         write_geopackage(tmp_path / "n.shp", small_network().layers())
 

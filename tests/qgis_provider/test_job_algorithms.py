@@ -134,20 +134,24 @@ def test_road_evidence_and_tagged_points_of_fusa_both_ways(both_ways, lidar_dir,
                                   read_las(there / "tagged.laz").classification)
 
 
-def test_an_external_stage_says_its_error_in_one_line(qgis_app, lidar_dir, tmp_path):
-    from qgis.core import (QgsProcessingContext, QgsProcessingException,
-                           QgsProcessingFeedback)
+def _refused_externally(algorithm_class, params: dict, message: str) -> None:
+    """The external run of ``algorithm_class`` with ``params`` fails with ``message``."""
+    from qgis.core import QgsProcessingContext, QgsProcessingException, QgsProcessingFeedback
 
-    from processing_provider.algorithms.lidar_ground_intensity import LidarGroundIntensity
-
-    algorithm = LidarGroundIntensity(_external_gisroads())
+    algorithm = algorithm_class(_external_gisroads())
     algorithm.initAlgorithm()
-    params = {"INPUT": str(tmp_path / "none.laz"), "OUTPUT": str(tmp_path / "i.tif"),
-              "HEIGHTS": str(tmp_path / "h.tif")}
     context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
     assert algorithm.prepare(params, context, feedback)
-    with pytest.raises(QgsProcessingException, match="none.laz: no such file"):
+    with pytest.raises(QgsProcessingException, match=message):
         algorithm.runPrepared(params, context, feedback)
+
+
+def test_an_external_stage_says_its_error_in_one_line(qgis_app, lidar_dir, tmp_path):
+    from processing_provider.algorithms.lidar_ground_intensity import LidarGroundIntensity
+
+    _refused_externally(LidarGroundIntensity, {
+        "INPUT": str(tmp_path / "none.laz"), "OUTPUT": str(tmp_path / "i.tif"),
+        "HEIGHTS": str(tmp_path / "h.tif")}, "none.laz: no such file")
     assert not list(tmp_path.glob("*.tif"))
 
 
@@ -335,7 +339,6 @@ def test_the_imagery_stages_both_ways(both_ways, tmp_path):
     and the grouping's refusal of segments off the image."""
     from affine import Affine
     from pyproj import CRS
-    from qgis.core import QgsProcessingContext, QgsProcessingException, QgsProcessingFeedback
 
     from gisroads.geo import GeoRaster
     from gisroads.io.raster import write_geotiff
@@ -359,14 +362,9 @@ def test_the_imagery_stages_both_ways(both_ways, tmp_path):
     far = gpd.GeoDataFrame({"segment_id": [0]}, geometry=[shapely.box(0, 0, 10, 10)],
                            crs="EPSG:32633")
     write_geopackage(tmp_path / "far.gpkg", {"segments": far})
-    algorithm = SegmentGrouping(_external_gisroads())
-    algorithm.initAlgorithm()
-    params = {"IMAGE": str(tmp_path / "image.tif"), "SEGMENTS": str(tmp_path / "far.gpkg"),
-              "OUTPUT": str(tmp_path / "out.gpkg")}
-    context, feedback = QgsProcessingContext(), QgsProcessingFeedback()
-    assert algorithm.prepare(params, context, feedback)
-    with pytest.raises(QgsProcessingException, match="no segment polygon overlaps the image"):
-        algorithm.runPrepared(params, context, feedback)
+    _refused_externally(SegmentGrouping, {
+        "IMAGE": str(tmp_path / "image.tif"), "SEGMENTS": str(tmp_path / "far.gpkg"),
+        "OUTPUT": str(tmp_path / "out.gpkg")}, "no segment polygon overlaps the image")
     assert not (tmp_path / "out.gpkg").exists()
 
 

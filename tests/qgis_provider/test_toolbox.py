@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from qgis.core import QgsApplication, QgsProcessingParameterNumber
 
 REPO = Path(__file__).resolve().parents[2]
@@ -126,3 +127,31 @@ def test_every_decimal_number_parameter_sets_its_decimals(qgis_app):
             == bool(algorithm_class.STAGE)
     assert checked > 50
     assert QgsApplication.instance() is not None
+
+
+def test_the_point_cloud_input_is_a_layer_where_qgis_opens_las_and_a_file_elsewhere(
+        qgis_app, monkeypatch, tmp_path):
+    from qgis.core import (QgsProcessingContext, QgsProcessingException,
+                           QgsProcessingParameterFile, QgsProcessingParameterPointCloudLayer)
+
+    from processing_provider.algorithms import base
+    from processing_provider.algorithms.lidar_ground_intensity import LidarGroundIntensity
+    from processing_provider.provider import algorithm_classes
+
+    cloud = str(tmp_path / "area.laz")
+    clouds = [a for a in (c() for c in algorithm_classes()) if a.initAlgorithm() is None
+              and isinstance(a.parameterDefinition("INPUT"), QgsProcessingParameterFile)
+              and "LAS" in a.parameterDefinition("INPUT").fileFilter()]
+    assert len(clouds) == 8  # every algorithm reading a point cloud
+    # Debian's QGIS has no PDAL provider: a file, read as given
+    assert not base.reads_point_clouds()
+    context = QgsProcessingContext()
+    assert base.cloud_path(clouds[0], {"INPUT": cloud}, context) == cloud
+
+    monkeypatch.setattr(base, "reads_point_clouds", lambda: True)
+    algorithm = LidarGroundIntensity()
+    algorithm.initAlgorithm()
+    assert isinstance(algorithm.parameterDefinition("INPUT"),
+                      QgsProcessingParameterPointCloudLayer)
+    with pytest.raises(QgsProcessingException, match="no point cloud that this QGIS can open"):
+        base.cloud_path(algorithm, {"INPUT": cloud}, context)
