@@ -36,6 +36,7 @@ from gisroads.learn.convnet_training import (export_onnx, model_from_onnx,  # no
                                              predict_tiles, state_to_arrays, train_convnet,
                                              working_tile)
 from gisroads.learn.scores import pixel_auc  # noqa: E402
+from gisroads.synthetic.rural import render_rural_tile  # noqa: E402
 
 TRAINING_DIR = ROOT.parent / "shared" / "data" / "training"
 PIXEL_M = 1.0
@@ -45,6 +46,10 @@ is not made finer than it was recorded, roads of 3 m and more stay three pixels 
 #: pixel IoU is reported at each of these road thresholds
 THRESHOLDS = tuple(np.round(np.arange(0.2, 0.75, 0.05), 2))
 SOURCE_PIXEL_M = {"eth_cil": 0.6, "cil2022": 0.6, "massachusetts_crops": 1.0, "dubai": 1.2}
+RURAL_SOURCE = "synthetic_rural"
+RURAL_PIXEL_M = 0.5
+RURAL_VALIDATION_SEEDS = range(100_000, 100_030)
+"""Seeds of the held-out synthetic rural tiles (the training tiles take 0, 1, 2, ...)."""
 DUBAI_ROAD = np.array([0x6E, 0xC1, 0xE4])
 DUBAI_UNLABELLED = np.array([0x9B, 0x9B, 0x9B])
 
@@ -84,6 +89,17 @@ def read_source(source: str):
         raise ValueError(source)
 
 
+def rural_tiles(seeds) -> list:
+    """Synthetic rural tiles (:func:`gisroads.synthetic.rural.render_rural_tile`) on the
+    working grid: earth tracks, villages and river beds, which no labelled source shows."""
+    tiles = []
+    for seed in seeds:
+        rgb, road = render_rural_tile(seed, pixel_m=RURAL_PIXEL_M)
+        tiles.append(working_tile(rgb, road, np.ones(road.shape, bool), source=RURAL_SOURCE,
+                                  source_pixel_m=RURAL_PIXEL_M, pixel_m=PIXEL_M))
+    return tiles
+
+
 def load_tiles():
     held_out = {line.strip() for line in (TRAINING_DIR / "validation.txt").read_text().split("\n")
                 if line.strip() and not line.startswith("#")}
@@ -121,6 +137,11 @@ def main(argv=None):
     parser.add_argument("--init", type=Path,
                         help="an .onnx written by this script to train further (its "
                              "training is recorded in the new card)")
+    parser.add_argument("--rural-tiles", type=int, default=0,
+                        help="synthetic rural tiles to train on as a fifth source")
+    parser.add_argument("--rural-weight", type=float, default=0.5,
+                        help="how often the rural source is drawn, relative to each "
+                             "labelled source")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--work", type=Path, default=ROOT / "out" / "train_road_cnn")
     parser.add_argument("--output", type=Path, default=DEFAULT_CONVNET_PATH)
@@ -129,6 +150,11 @@ def main(argv=None):
     args.work.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     train, validation = load_tiles()
+    weights = None
+    if args.rural_tiles:
+        train += rural_tiles(range(args.rural_tiles))
+        validation += rural_tiles(RURAL_VALIDATION_SEEDS)
+        weights = {RURAL_SOURCE: args.rural_weight}
     print(f"{len(train)} training and {len(validation)} held-out tiles "
           f"({time.perf_counter() - started:.0f} s)", flush=True)
 
@@ -143,11 +169,13 @@ def main(argv=None):
     model, earlier = (model_from_onnx(args.init) if args.init else (None, None))
     model = train_convnet(train, steps=args.steps, batch=args.batch, crop_px=args.crop,
                           learning_rate=args.learning_rate, seed=args.seed, model=model,
+                          source_weights=weights,
                           progress=progress, checkpoint=checkpoint)
     seconds = time.perf_counter() - started
     scores = evaluate(model, validation)
     thresholds = list(next(iter(scores.values()))["iou"])
-    mean_iou = {th: float(np.mean([s["iou"][th] for s in scores.values()])) for th in thresholds}
+    labelled = [s for source, s in scores.items() if source != RURAL_SOURCE]
+    mean_iou = {th: float(np.mean([s["iou"][th] for s in labelled])) for th in thresholds}
     threshold = max(mean_iou, key=mean_iou.get)
     metadata = {"pixel_m": PIXEL_M, "threshold": threshold, "architecture": "RoadUNet",
                 "parameters": int(sum(v.size for v in state_to_arrays(model).values())),
@@ -157,13 +185,14 @@ def main(argv=None):
                 "machine": f"{platform.processor() or platform.machine()}, "
                            f"{torch.get_num_threads()} torch threads",
                 "torch": torch.__version__, "training_tiles": len(train),
+                "rural_tiles": args.rural_tiles, "rural_weight": args.rural_weight,
                 "validation": {s: {"tiles": v["tiles"], "auc": round(v["auc"], 3),
                                    "iou": round(v["iou"][threshold], 3)}
                                for s, v in scores.items()}}
     if earlier is not None:
         metadata["continued_from"] = {key: earlier.get(key) for key in (
             "steps", "batch", "crop_px", "seed", "learning_rate", "training_seconds",
-            "continued_from")}
+            "rural_tiles", "rural_weight", "continued_from")}
     export_onnx(model, args.output, metadata)
     (args.work / "validation.json").write_text(json.dumps(scores, indent=1))
     write_card(args.output.with_suffix(".md"), metadata, scores, mean_iou)
@@ -185,24 +214,38 @@ def write_card(path: Path, metadata: dict, scores: dict, mean_iou: dict) -> None
         f"{metadata['crop_px']} px, seed {metadata['seed']}, one-cycle peak learning rate "
         f"{metadata['learning_rate']:g}, "
         f"{metadata['training_seconds'] / 60:.0f} min on {metadata['machine']} "
-        f"(torch {metadata['torch']}); {metadata['training_tiles']} tiles of four sources "
-        "(ETH CIL, CIL 2022, Massachusetts crops, Dubai; see ../shared/data/training), "
-        "drawn equally often by source.",
+        f"(torch {metadata['torch']}); {metadata['training_tiles']} tiles: "
+        + _sources_line(metadata),
         "- Augmentation: scale 0.6-1.6, rotation, flips, colour, brightness, contrast, gamma, "
         "haze, greyscale, blur, noise, JPEG, straight no-data borders. Loss: BCE + soft "
         "Dice, no-data masked out.",
-        f"- Road threshold {threshold}: the best mean pixel IoU of the four sources on the "
-        "held-out tiles (`validation.txt`).", "",
+        f"- Road threshold {threshold}: the best mean pixel IoU of the four labelled sources "
+        "on their held-out tiles (`validation.txt`).", "",
         "## Held-out tiles (working grid)", "",
         "| source | tiles | pixel AUC | pixel IoU at the threshold |", "|---|---|---|---|"]
     for source, row in scores.items():
         lines.append(f"| {source} | {row['tiles']} | {row['auc']:.3f} | "
                      f"{row['iou'][threshold]:.3f} |")
-    lines += ["", "Mean IoU by threshold: " + ", ".join(f"{t}: {v:.3f}"
+    lines += ["", "Mean IoU of the four labelled sources by threshold: " + ", ".join(f"{t}: {v:.3f}"
                                                       for t, v in mean_iou.items()), "",
               "Provenance: the training tiles state no licence except Dubai's (CC0); "
               "see ../shared/data/training/README.md.", ""]
     path.write_text("\n".join(lines))
+
+
+def _sources_line(metadata: dict) -> str:
+    """What the last cycle trained on, for the card."""
+    labelled = ("the four labelled sources (ETH CIL, CIL 2022, Massachusetts crops, Dubai; "
+                "see ../shared/data/training)")
+    rural = metadata.get("rural_tiles")
+    if not rural:
+        return labelled + ", drawn equally often by source."
+    return (f"{labelled} and {rural} synthetic rural tiles at {RURAL_PIXEL_M} m "
+            "(`gisroads.synthetic.rural`: earth tracks, villages, river beds), the labelled "
+            f"sources drawn equally often, the rural tiles {metadata['rural_weight']:g} times "
+            f"as often as one of them; the held-out rural tiles are seeds "
+            f"{RURAL_VALIDATION_SEEDS.start}-{RURAL_VALIDATION_SEEDS.stop - 1}, left out of "
+            "the threshold's choice.")
 
 
 def _earlier_cycles(earlier: dict | None) -> list[str]:
@@ -214,7 +257,9 @@ def _earlier_cycles(earlier: dict | None) -> list[str]:
     return [f"- Cycle {k}{' (from scratch)' if k == 1 else ''}: {cycle['steps']} steps of "
             f"{cycle['batch']} crops of {cycle['crop_px']} px, seed {cycle['seed']}, one-cycle "
             f"peak learning rate {cycle.get('learning_rate') or 3e-3:g}, "
-            f"{cycle['training_seconds'] / 60:.0f} min."
+            f"{cycle['training_seconds'] / 60:.0f} min"
+            + (f", with {cycle['rural_tiles']} synthetic rural tiles." if cycle.get("rural_tiles")
+               else ".")
             for k, cycle in enumerate(chain, start=1)]
 
 if __name__ == "__main__":

@@ -31,6 +31,7 @@ MODULES = [
     "gisroads.synthetic.image",
     "gisroads.synthetic.network",
     "gisroads.synthetic.perturb",
+    "gisroads.synthetic.rural",
     "gisroads.update.conflate",
 ]
 OPTIONS = doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE

@@ -35,6 +35,9 @@ TILE_PX = 1024
 """Side of the tiles the network sees, working pixels."""
 OVERLAP_PX = 64
 """Overlap of neighbouring tiles, working pixels: their predictions are blended across it."""
+TAIL_CONTEXT_PX = 96
+"""Context, working pixels, that the narrow window over the end of a short axis sees
+before the part the first window leaves out (:func:`_windows`)."""
 VIEWS = 2
 """Views of each tile averaged by default (:func:`convnet_probability`): the tile and its
 half-turn, chosen on the held-out training tiles (figures in docs/imagery.md)."""
@@ -168,10 +171,25 @@ def _blend_weight(rows: int, cols: int, overlap: int) -> np.ndarray:
     return np.outer(ramp(rows), ramp(cols))
 
 
-def _window_starts(n: int, tile: int, overlap: int) -> list[int]:
-    if n <= tile:
-        return [0]
-    return list(range(0, n - tile, tile - overlap)) + [n - tile]
+def _windows(n: int, tile: int, overlap: int) -> list[tuple[int, int]]:
+    """``(start, size)`` of the network's windows along an axis of ``n`` working pixels.
+
+    Sizes are multiples of 32 (the network halves its grid five times) and the windows lie
+    inside the image: padding would show the network a no-data border along the image's
+    edge, where it learnt that roads may run. An axis shorter than ``tile`` that is no
+    multiple of 32 gets a second, narrow window over its end with
+    :data:`TAIL_CONTEXT_PX` of context; one shorter than 32 is padded.
+    """
+    if n < 32:
+        return [(0, 32)]
+    if n >= tile:
+        starts = list(range(0, n - tile, tile - overlap)) + [n - tile]
+        return [(start, tile) for start in starts]
+    size = n // 32 * 32
+    if size == n:
+        return [(0, n)]
+    tail = min(size, -(-(n - size + TAIL_CONTEXT_PX) // 32) * 32)
+    return [(0, size), (n - tail, tail)]
 
 
 class _Resampler:
@@ -289,14 +307,11 @@ def convnet_probability(image: GeoRaster, model: ConvNet | None = None, *,
     grid = _Resampler(image, model.pixel_m)
     low, high = normalisation(*grid.sample())
     rows, cols = grid.shape
-    # the network halves its grid five times: tiles are multiples of 32
-    tile_r = min(tile_px, -(-rows // 32) * 32)
-    tile_c = min(tile_px, -(-cols // 32) * 32)
     total = np.zeros(grid.shape, np.float32)
     weights = np.zeros(grid.shape, np.float32)
-    windows = [(r, c) for r in _window_starts(rows, tile_r, overlap_px)
-               for c in _window_starts(cols, tile_c, overlap_px)]
-    for k, (r0, c0) in enumerate(windows):
+    windows = [(r0, tile_r, c0, tile_c) for r0, tile_r in _windows(rows, tile_px, overlap_px)
+               for c0, tile_c in _windows(cols, tile_px, overlap_px)]
+    for k, (r0, tile_r, c0, tile_c) in enumerate(windows):
         r1, c1 = min(rows, r0 + tile_r), min(cols, c0 + tile_c)
         bands, valid = grid.window(r0, r1, c0, c1)
         if valid.any():

@@ -11,9 +11,9 @@ from affine import Affine
 from pyproj import CRS
 
 from gisroads.geo import GeoRaster
-from gisroads.learn.convnet import (DEFAULT_CONVNET_PATH, ConvNet, convnet_probability,
-                                    is_convnet_file, load_convnet, network_input,
-                                    normalisation)
+from gisroads.learn.convnet import (DEFAULT_CONVNET_PATH, ConvNet, _windows,
+                                    convnet_probability, is_convnet_file, load_convnet,
+                                    network_input, normalisation)
 from gisroads.progress import Cancelled
 from gisroads.synthetic import make_scene, render_image
 
@@ -48,8 +48,23 @@ def _like(image: GeoRaster, data, nodata=None) -> GeoRaster:
 
 def _tiles_per_axis(n: int, tile: int, overlap: int) -> int:
     """Tiles of ``tile`` pixels overlapping by ``overlap`` that cover ``n`` pixels, the
-    last one flush with the end."""
-    return 1 if n <= tile else int(np.ceil((n - tile) / (tile - overlap))) + 1
+    last one flush with the end; an axis shorter than a tile takes one window, or two
+    when it is no multiple of 32."""
+    if n < tile:
+        return 1 if n % 32 == 0 else 2
+    return int(np.ceil((n - tile) / (tile - overlap))) + 1
+
+
+@pytest.mark.parametrize("n", [1, 31, 32, 200, 240, 512, 1000, 1024, 1500, 3000])
+def test_windows_lie_inside_the_image_and_cover_it(n):
+    windows = _windows(n, 1024, 64)
+    assert len(windows) == _tiles_per_axis(n, 1024, 64) or n < 32
+    covered = np.zeros(max(n, 32), bool)
+    for start, size in windows:
+        assert size % 32 == 0 and start >= 0
+        assert start + size <= n or (n < 32 and (start, size) == (0, 32))
+        covered[start:start + size] = True
+    assert covered[:n].all()
 
 
 def test_bundled_model_loads_with_its_working_pixel_and_threshold(bundled):
@@ -258,11 +273,12 @@ def test_progress_is_reported_once_per_tile_and_ends_at_1(bundled, scene_rgb):
     assert fractions == sorted(fractions) and fractions[-1] == 1.0
     assert 0.0 < fractions[0] < 1.0
     assert calls[-1][1].endswith(f"tile {tiles} of {tiles}")
-    # the default tiles: one for this image
+    # the default tiles: a 300 x 300 px working grid, shorter than a tile and no multiple
+    # of 32, takes two windows along each axis
     calls.clear()
     convnet_probability(scene_rgb, bundled,
                         progress=lambda fraction, message: calls.append(fraction))
-    assert calls == [1.0]
+    assert calls == [0.25, 0.5, 0.75, 1.0]
 
 
 def test_cancel_from_the_progress_callback_stops_the_run(bundled, scene_rgb):
@@ -316,6 +332,6 @@ def test_probabilities_are_the_same_in_both_environments(bundled):
     image, _ = render_image(scene, pixel_m=0.75)
     p = convnet_probability(GeoRaster(image.data[:3], image.transform, image.crs), bundled).data
     pixels = ([50, 100, 200, 300, 350, 189], [60, 200, 140, 390, 20, 184])
-    np.testing.assert_allclose(p[pixels], [0.068083, 0.003236, 0.004659, 0.001682, 0.025405,
-                                           0.99913], atol=1e-5)
-    assert float(np.nanmean(p)) == pytest.approx(0.234209, abs=1e-5)
+    np.testing.assert_allclose(p[pixels], [0.152651, 0.000272, 0.001424, 0.002407, 0.007825,
+                                           0.999492], atol=1e-5)
+    assert float(np.nanmean(p)) == pytest.approx(0.222203, abs=1e-5)
