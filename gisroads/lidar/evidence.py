@@ -867,6 +867,9 @@ def road_evidence(cloud: PointCloud, *, cell_m: float | None = None, bounds=None
 #: Lowest return above the terrain of an object of a vehicle's height (car 1.4-1.9 m, van
 #: up to 2.5 m), metres: :func:`vehicle_cells`.
 VEHICLE_HEIGHT_M = (0.8, 2.5)
+#: A road's flank (:func:`flank_share`) starts this far past its edge and is this deep,
+#: metres: a row of parked cars beside an aisle is about 5 m deep.
+FLANK_GAP_M, FLANK_DEPTH_M = 0.5, 5.0
 #: A road whose flanks are at least this share vehicle cells is a car-park aisle
 #: (:func:`without_car_park_aisles`).
 CAR_PARK_FLANK_SHARE = 0.15
@@ -913,8 +916,8 @@ def vehicle_cells(evidence: RoadEvidence, *, height_m: tuple[float, float] = VEH
     return GeoRaster(out, raster.transform, raster.crs, nodata=np.nan)
 
 
-def flank_share(centrelines, cells: GeoRaster, *, gap_m: float = 0.5,
-                depth_m: float = 5.0) -> np.ndarray:
+def flank_share(centrelines, cells: GeoRaster, *, gap_m: float = FLANK_GAP_M,
+                depth_m: float = FLANK_DEPTH_M) -> np.ndarray:
     """Per road, the share of its two flanks covered by marked cells (vehicles:
     :func:`vehicle_cells`; pulse dropouts: :func:`dropout_cells`).
 
@@ -1026,8 +1029,6 @@ def without_flanked_roads(likelihood: GeoRaster, centrelines, flanks: dict, *,
     taken : GeoDataFrame
         The roads taken, with their ``reason`` and ``flank_share``.
     """
-    from rasterio import features
-
     reason = np.full(len(centrelines), "", dtype=object)
     share = np.zeros(len(centrelines))
     found = np.zeros(len(centrelines), bool)
@@ -1036,15 +1037,24 @@ def without_flanked_roads(likelihood: GeoRaster, centrelines, flanks: dict, *,
         hit = ~found & (measured >= max_share)
         reason[hit], share[hit], found = name, measured[hit], found | hit
     taken = centrelines[found].assign(reason=reason[found], flank_share=share[found])
+    return without_roads(likelihood, taken, margin_m=margin_m), taken
+
+
+def without_roads(likelihood: GeoRaster, roads, *, margin_m: float = 1.0) -> GeoRaster:
+    """A copy of the likelihood with the band ``width / 2 + margin_m`` (metres) of each of
+    ``roads`` (LineStrings with ``width_m``, in its CRS) set to 0, NaN cells kept: run the
+    network stage again on it and the roads are gone, the roads they touched joined and
+    split as if they had never been there."""
+    from rasterio import features
+
     data = np.array(likelihood.data, dtype=np.float32, copy=True)
-    if len(taken):
-        bands = shapely.buffer(taken.geometry.values,
-                               taken["width_m"].to_numpy(float) / 2 + margin_m)
+    if len(roads):
+        bands = shapely.buffer(roads.geometry.values,
+                               roads["width_m"].to_numpy(float) / 2 + margin_m)
         erase = features.rasterize(list(bands), out_shape=data.shape,
                                    transform=likelihood.transform).astype(bool)
         data[erase & np.isfinite(data)] = 0.0
-    return GeoRaster(data, likelihood.transform, likelihood.crs,
-                     nodata=likelihood.nodata), taken
+    return GeoRaster(data, likelihood.transform, likelihood.crs, nodata=likelihood.nodata)
 
 
 def without_car_park_aisles(likelihood: GeoRaster, centrelines, vehicles: GeoRaster, *,

@@ -40,12 +40,14 @@ from ..io.raster import geotiff_writer
 from ..parallel import NOT_KEPT, for_each_result, keep_result, kept_result, shared_workers
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
+from ..network.branches import branches_into
 from ..network.rasters import raster_to_network
 from ..tiling.tiles import OVERLAP_M, TILE_M, Tile, stitch_tiles
 from ..tiling.tilestore import (TileStore, code_fingerprint, digest, file_digest, inputs_crs,
                                 las_inputs, open_store)
-from .evidence import (CAR_PARK_FLANK_SHARE, SHORE_FLANK_SHARE, dropout_cells, road_evidence,
-                       vehicle_cells, without_flanked_roads)
+from .evidence import (CAR_PARK_FLANK_SHARE, FLANK_DEPTH_M, FLANK_GAP_M, SHORE_FLANK_SHARE,
+                       dropout_cells, road_evidence, vehicle_cells, without_flanked_roads,
+                       without_roads)
 from .ground import GroundPlanes, ground_planes
 from .learned import (evidence_features, fit_evidence_model, learned_likelihood,
                       load_evidence_model)
@@ -491,8 +493,15 @@ def _evidence_roads(path, *, threshold: float, network_options: dict | None, mod
         if len(taken):
             network = raster_to_network(likelihood, threshold=threshold,
                                         method=EVIDENCE_METHOD,
-                                        progress=scaled(progress, 0.8, 1.0), **options)
-        network.qa[SERVICE_CENTRELINES] = service_lines(taken.query("reason == 'car-park aisle'"))
+                                        progress=scaled(progress, 0.8, 0.9), **options)
+        aisles = taken.query("reason == 'car-park aisle'")
+        likelihood, accesses = without_car_park_accesses(likelihood, network.centrelines,
+                                                         aisles)
+        if len(accesses):
+            network = raster_to_network(likelihood, threshold=threshold,
+                                        method=EVIDENCE_METHOD,
+                                        progress=scaled(progress, 0.9, 1.0), **options)
+        network.qa[SERVICE_CENTRELINES] = service_lines(pd.concat([aisles, accesses]))
     network.qa.setdefault(SERVICE_CENTRELINES, service_lines(network.centrelines.iloc[:0]))
     report(progress, 1.0, f"{len(network.centrelines)} roads, {len(network.junctions)} "
                           f"junctions, {len(network.qa[SERVICE_CENTRELINES])} service ways")
@@ -543,6 +552,40 @@ def train_evidence_model(path, roads: gpd.GeoDataFrame, *, width_m=None,
                                guard_m=guard_m, seed=seed, threads=threads)
     report(progress, 1.0, "model fitted")
     return model
+
+
+def without_car_park_accesses(likelihood: GeoRaster, centrelines: gpd.GeoDataFrame,
+                              aisles: gpd.GeoDataFrame) -> tuple[GeoRaster, gpd.GeoDataFrame]:
+    """The likelihood with the ways that lead only into a car park set to 0 (beyond the
+    paper): the branches of the network (:func:`gisroads.network.branches.branches_into`)
+    that end only among the car park's aisles (entrances with their islands, driveways into
+    the lot, what is left of the lot's lanes).
+
+    Parameters
+    ----------
+    likelihood : GeoRaster
+        The road likelihood, NaN outside the data, the aisles already at 0.
+    centrelines : GeoDataFrame
+        The roads of a network built on it (``width_m``), in its CRS.
+    aisles : GeoDataFrame
+        The car-park aisles taken out (:func:`gisroads.lidar.evidence.without_flanked_roads`);
+        the car park is their band with its rows of cars (``width / 2`` plus the flank
+        :func:`gisroads.lidar.evidence.flank_share` reads).
+
+    Returns
+    -------
+    likelihood : GeoRaster
+        A copy, the accesses at 0.
+    accesses : GeoDataFrame
+        The lines taken, ``reason`` "car-park access".
+    """
+    if not len(aisles) or not len(centrelines):
+        return likelihood, centrelines.iloc[:0].assign(reason=np.array([], dtype=object))
+    reach = aisles["width_m"].to_numpy(float) / 2 + FLANK_GAP_M + FLANK_DEPTH_M
+    car_park = shapely.union_all(shapely.buffer(aisles.geometry.values, reach))
+    taken = branches_into(centrelines.geometry.values, car_park)
+    accesses = centrelines[taken].assign(reason="car-park access")
+    return without_roads(likelihood, accesses), accesses
 
 
 def service_lines(lines: gpd.GeoDataFrame) -> gpd.GeoDataFrame:

@@ -341,8 +341,9 @@ def test_a_forest_plot_with_ponds_gives_no_road_with_the_evidence_cue(lidar_dir)
 
 
 def test_fusa_car_park_aisles_go_to_the_service_layer(lidar_dir):
-    """The default cue keeps the aisles it takes out of the roads as service ways, scored
-    against the truth's service layer (car-park aisles and accesses)."""
+    """The default cue keeps the aisles it takes out of the roads, and the ways that lead
+    only into the car park (its entrance round an island), as service ways, scored against
+    the truth's service layer (car-park aisles and accesses); the roads lose them."""
     import pandas as pd
 
     from gisroads.evaluate import buffer_metrics
@@ -354,13 +355,17 @@ def test_fusa_car_park_aisles_go_to_the_service_layer(lidar_dir):
     truth = lidar_dir / "ground_truth" / "fusa"
     service_truth = read_layer(truth / "service.geojson")
     roads_truth = read_layer(truth / "centrelines.geojson")
-    assert (service["kind"] == "service").all() and (service["reason"] == "car-park aisle").all()
+    assert (service["kind"] == "service").all()
+    assert set(service["reason"]) == {"car-park aisle", "car-park access"}
     assert (network.centrelines["kind"] == "road").all()
-    # measured: 9 aisles, 266 m, correctness 0.870 against the service truth, completeness
-    # 0.510; none on a road of the truth
+    # measured: 9 aisles and 4 accesses, 396 m, correctness 0.857 against the service truth,
+    # completeness 0.714 (the aisles alone 0.510); none on a road of the truth
     scores = buffer_metrics(service.to_crs(service_truth.crs), service_truth, buffer_m=3.0)
-    assert service.length.sum() > 200 and scores.correctness > 0.8
-    assert scores.completeness > 0.4
+    assert service.length.sum() > 300 and scores.correctness > 0.8
+    assert scores.completeness > 0.65
+    roads = buffer_metrics(network.centrelines.to_crs(roads_truth.crs), roads_truth,
+                           buffer_m=3.0)
+    assert roads.completeness > 0.9 and roads.correctness > 0.73  # 0.929 / 0.752
     on_roads = buffer_metrics(service.to_crs(roads_truth.crs), roads_truth, buffer_m=3.0)
     assert on_roads.correctness < 0.05
     both = pd.concat([network.centrelines, service]).to_crs(service_truth.crs)
