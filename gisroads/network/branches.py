@@ -10,7 +10,6 @@ cul-de-sac) stays.
 """
 from __future__ import annotations
 
-import networkx as nx
 import numpy as np
 import shapely
 
@@ -48,6 +47,8 @@ def branches_into(lines, area, *, snap_m: float = 0.5) -> np.ndarray:
     >>> [bool(b) for b in branches_into(lines, car_park)]
     [False, False, False, True, False]
     """
+    import networkx as nx  # a graph library is a cost only the car-park rule should pay
+
     lines = np.asarray(lines, dtype=object)
     taken = np.zeros(len(lines), dtype=bool)
     if len(lines) == 0 or area is None or area.is_empty:
