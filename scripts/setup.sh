@@ -54,7 +54,8 @@ step_venv() {
   echo "setup: building .venv (standalone, PyPI wheels)"
   rm -rf .venv
   /usr/bin/python3 -m venv .venv
-  .venv/bin/pip install -q --upgrade pip
+  # wheel: the plugin build (pip wheel --no-build-isolation) needs it beside setuptools < 70.1
+  .venv/bin/pip install -q --upgrade pip wheel
   .venv/bin/pip install -q -e '.[test]'
   rm -f "$STAMPS"/venv-*; touch "$stamp"
 }
