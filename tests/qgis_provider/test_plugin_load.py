@@ -344,35 +344,42 @@ def test_external_mode_cancel_stops_the_command_and_leaves_nothing(qgis_app, tmp
     assert list(tmp_path.iterdir()) == []
 
 
-def test_desktop_dialog_runs_the_lidar_pipeline_through_external_gisroads(plugin_zip, lidar_dir,
-                                                                         tmp_path):
+@pytest.mark.parametrize("algorithm, input_name, background", [
+    ("lidarroadnetwork", "fusa", "ground intensity"),
+    ("imageryroadnetwork", "spacenet_paris_img1447", None),
+])
+def test_desktop_dialog_runs_the_pipeline_through_external_gisroads(
+        plugin_zip, lidar_dir, tmp_path, algorithm, input_name, background):
     """The QGIS desktop under Xvfb, started the usual way (system Python), the algorithm's
-    dialog opened, run and grabbed before and after (scripts/qgis_dialog_screenshot.sh)."""
+    dialog opened, run and grabbed before and after (scripts/qgis_dialog_screenshot.sh);
+    the roads are loaded ticked over their input, the QA layers unticked."""
     from skimage.io import imread
 
     env = {**os.environ, "GISROADS_EXECUTABLE": external_gisroads(),
            "OPENBLAS_NUM_THREADS": "1"}
     for name in ("PYTHONPATH", "QT_QPA_PLATFORM"):   # a desktop on the X server
         env.pop(name, None)
-    out = tmp_path / "fusa.gpkg"
+    out = tmp_path / f"{input_name}.gpkg"
+    parameters = ({"INPUT": str(lidar_dir / "fusa.laz"), "BACKGROUND": "TEMPORARY_OUTPUT"}
+                  if algorithm == "lidarroadnetwork"
+                  else {"INPUT": str(REPO / "data" / "demo" / f"{input_name}.tif")})
     done = subprocess.run(
         [str(REPO / "scripts" / "qgis_dialog_screenshot.sh"), str(tmp_path),
-         "gisroads:lidarroadnetwork",
-         json.dumps({"INPUT": str(lidar_dir / "fusa.laz"), "OUTPUT": str(out),
-                     "BACKGROUND": "TEMPORARY_OUTPUT"})],
+         f"gisroads:{algorithm}", json.dumps({**parameters, "OUTPUT": str(out)})],
         env=env, capture_output=True, text=True, timeout=660)
-    assert "algorithm: ExternalLidarRoadNetwork" in done.stdout, done.stdout + done.stderr
+    assert "algorithm: External" in done.stdout, done.stdout + done.stderr
     assert "finished: True" in done.stdout and out.exists()
     assert "Traceback" not in done.stdout + done.stderr
     for name in ("dialog.png", "window_before_run.png", "dialog_after_run.png",
                  "window_after_run.png"):
         image = imread(tmp_path / name)
         assert image.shape[0] > 400 and image.shape[1] > 600 and image.std() > 20
-    # the dialog loaded the layers: the roads ticked over the ground intensity
     (layers,) = [json.loads(line[len("layers: "):]) for line in done.stdout.splitlines()
                  if line.startswith("layers: ")]
-    assert ["fusa – road centre lines", True] in layers
-    assert layers[-1] == ["fusa – ground intensity", True]
+    assert [f"{input_name} – road centre lines", True] in layers
+    assert all(not shown for name, shown in layers if "(QA)" in name)
+    assert layers[-1] == ([f"{input_name} – {background}", True] if background
+                          else [input_name, True])
 
 
 @pytest.fixture(scope="module")
