@@ -123,14 +123,30 @@ class _Nearest:
     closest: np.ndarray
 
 
+@dataclass(frozen=True)
+class _Pairs:
+    """The other side's samples paired both ways (:func:`_mutual`) with a line of this side:
+    ``line`` per sample of the other side (-1: none), ``group_of_line`` this side's feature
+    per line, and ``own_group`` this side's feature per sample being matched."""
+
+    samples: _Samples
+    line: np.ndarray
+    group_of_line: np.ndarray
+    own_group: np.ndarray
+
+
 def _nearest_compatible(samples: _Samples, lines: np.ndarray, search_m: float,
-                        min_cos: float) -> _Nearest:
+                        min_cos: float, pairs: _Pairs | None = None) -> _Nearest:
     """For each sample, the nearest line within ``search_m`` whose direction there is within
     the angle whose cosine is ``min_cos`` of the sample's (either way along).
 
     A line the sample lies beside ranks before one it lies beyond the end of: past the end of
     a database road, the extracted line's own continuation belongs to the next road, or to
-    the same road moved sideways, not to the road that stops there.
+    the same road moved sideways, not to the road that stops there. With ``pairs``, a line
+    whose place there is paired both ways with another feature ranks after one that is not:
+    a road moved onto its twin carriageway matches its own extracted line 5-10 m away, not
+    the twin's; a line that every candidate shares (one line drawn down a divided road)
+    still matches.
     """
     n = len(samples.points)
     source, target = shapely.STRtree(lines).query(samples.points, predicate="dwithin",
@@ -142,7 +158,12 @@ def _nearest_compatible(samples: _Samples, lines: np.ndarray, search_m: float,
     source, target, chainage = source[keep], target[keep], chainage[keep]
     distance = shapely.distance(samples.points[source], lines[target])
     beyond = (chainage <= 1e-6) | (chainage >= shapely.length(lines[target]) - 1e-6)
-    order = np.lexsort((distance, beyond, source))
+    claimed = np.zeros(len(source), dtype=bool)
+    if pairs is not None:
+        partner = pairs.line[pairs.samples.nearest_sample(target, chainage)]
+        claimed = (partner >= 0) & (pairs.group_of_line[np.maximum(partner, 0)]
+                                    != pairs.own_group[source])
+    order = np.lexsort((distance, beyond, claimed, source))
     best = order[np.r_[True, np.diff(source[order]) != 0]] if len(order) else order
     result = _Nearest(np.full(n, -1), np.zeros(n), np.full((n, 2), np.nan),
                       np.full(n, np.inf), np.zeros(n, dtype=bool), np.full(n, np.inf))
@@ -430,6 +451,14 @@ def conflate(extracted: gpd.GeoDataFrame, database: gpd.GeoDataFrame, *,
     db_near = _nearest_compatible(db, ext_lines, search_m, min_cos)
     ext_near = _nearest_compatible(ext, db_lines, search_m, min_cos)
     db_feature = db_row[db.line]
+    # the places already paired both ways are claimed: match again around them
+    db_pair = np.where(_mutual(db_near, ext, ext_near, db_feature, db_row), db_near.line, -1)
+    ext_pair = np.where(_mutual(ext_near, db, db_near, ext_row[ext.line], ext_row),
+                        ext_near.line, -1)
+    db_near = _nearest_compatible(db, ext_lines, search_m, min_cos,
+                                  _Pairs(ext, ext_pair, db_row, db_feature))
+    ext_near = _nearest_compatible(ext, db_lines, search_m, min_cos,
+                                   _Pairs(db, db_pair, ext_row, ext_row[ext.line]))
     db_seen = (_mutual(db_near, ext, ext_near, db_feature, db_row)
                | (db_near.closest <= tolerance_m))
     ext_seen = (_mutual(ext_near, db, db_near, ext_row[ext.line], ext_row)

@@ -185,6 +185,30 @@ def test_a_crossing_road_is_no_match(street):
     assert changes["proposed_update"]["change"].tolist() == ["missing", "new"]
 
 
+def _divided_road(*ys):
+    crs = "EPSG:32633"
+    return gpd.GeoDataFrame({"db_id": np.arange(1, len(ys) + 1)},
+                            geometry=[shapely.LineString([(500000, 4500000 + y),
+                                                          (500200, 4500000 + y)]) for y in ys],
+                            crs=crs)
+
+
+def test_a_carriageway_moved_onto_its_twin_is_moved_and_one_line_serves_both():
+    """A divided road, carriageways 7 m apart, both extracted. One carriageway digitised
+    8 m off, across its twin: it is moved (its own line 8 m away), not the twin's road;
+    the twin stays unchanged. A single line down the middle of carriageways 5 m apart still
+    serves both."""
+    extracted = _divided_road(0.0, 7.0)
+    database = _divided_road(8.0, 7.0)
+    changes = conflate(extracted, database, id_field="db_id")
+    change = changes["proposed_update"].set_index("db_id")["change"]
+    assert change[1] == "moved" and change[2] == "unchanged"
+    middle = _divided_road(2.5)
+    change = conflate(middle, _divided_road(0.0, 5.0), id_field="db_id")[
+        "proposed_update"].set_index("db_id")["change"]
+    assert change.tolist() == ["unchanged", "unchanged"]
+
+
 def test_bad_input_is_refused(street):
     extracted, database = street
     points = gpd.GeoDataFrame({"id": [1]}, geometry=[shapely.Point(500000, 4500000)],
