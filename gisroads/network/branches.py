@@ -92,10 +92,10 @@ def branches_into(lines, area, *, snap_m: float = 0.5) -> np.ndarray:
     forest.add_nodes_from(range(count))
     for line in bridges.tolist():
         forest.add_edge(*piece[edges[line]].tolist(), line=line)
+    beneath = own.copy()   # a piece and all below it, the bridges down to them included
     for members in nx.connected_components(forest):
         root = min(members)
         below = nx.dfs_tree(forest, root)
-        beneath = own.copy()   # a piece and all below it, the bridges down to them included
         for child in nx.dfs_postorder_nodes(below, root):
             for grandchild in below.successors(child):
                 beneath[child] += beneath[grandchild] + bridge_own[
