@@ -6,6 +6,7 @@ from .report import ProgressBar, print_result
 
 
 def add_parser(subparsers) -> None:
+    from ..jobs import train_job
     from ..learn.convnet import FINE_TUNE_STEPS
     p = add_command(
         subparsers, "train", run, "train a road model on an image or a point cloud from a "
@@ -35,6 +36,12 @@ def add_parser(subparsers) -> None:
                    help="with an .onnx output: optimiser steps of 8 crops (default "
                         f"{FINE_TUNE_STEPS}: about a minute for a 1500 x 1500 tile on two "
                         "cores)")
+    p.add_argument("--check", type=float, default=job_default(train_job, "check_share"),
+                   metavar="SHARE",
+                   help="with an .onnx output: share of the layer's road length left out of "
+                        "the training to check the fine-tuned network against the base one; "
+                        "the base one is written when it finds more of those roads (default "
+                        "%(default)g; 0: no check)")
     _add_sample_options(p)
     add_georeferencing_options(p, "an image")
 
@@ -72,6 +79,7 @@ def run(args) -> int:
     result = train_job(args.image, args.roads, args.out, width_field=args.width_field,
                        width_m=args.width, pixel_m=args.pixel, crs=args.crs,
                        samples=args.samples, seed=args.seed, base=args.base,
-                       steps=args.steps, progress=ProgressBar(not args.json), **guard)
+                       steps=args.steps, check_share=args.check,
+                       progress=ProgressBar(not args.json), **guard)
     print_result(result, args.json)
     return 0

@@ -3,6 +3,7 @@ with a learned road cue), its segmentation and grouping stages alone, and traini
 on an image from a road layer."""
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import geopandas as gpd
@@ -18,7 +19,7 @@ from ..imagery.roadparts import extract_road_parts, rasterize_segments
 from ..imagery.segments import frame_to_labels, segment_image, segments_to_frame
 from ..io.vector import write_geopackage
 from ..io.raster import read_raster, write_geotiff
-from ..learn.convnet import FINE_TUNE_STEPS
+from ..learn.convnet import CHECK_SHARE, FINE_TUNE_STEPS
 from ..learn.model import save_model, with_metadata
 from ..learn.training import train_from_layer
 from ..progress import Progress, report, scaled
@@ -99,14 +100,16 @@ def train_job(image_path, roads_path, out_path, *, width_field: str | None = Non
               pixel_m: float | None = None, crs=None,
               samples: int = stage_default(train_from_layer, "samples"),
               seed: int = stage_default(train_from_layer, "seed"),
-              base=None, steps: int | None = None,
+              base=None, steps: int | None = None, check_share: float = CHECK_SHARE,
               progress: Progress = None) -> dict:
     """Train a road model on an image from a road layer over it (the agency's update case).
 
     An ``out_path`` ending in ``.onnx`` fine-tunes the convolutional network (``base``, the
     bundled one by default, for ``steps`` optimiser steps:
     :func:`gisroads.learn.convnet_training.fine_tune_on_layer`; needs the ``train`` extra,
-    PyTorch); any other suffix trains boosted trees, as follows.
+    PyTorch), with ``check_share`` of the roads left out to check it against the base
+    network, which is written instead (with a warning) when it finds more of them; any other
+    suffix trains boosted trees, as follows.
 
     Roads (any OGR line layer or a GeoDataFrame, any CRS; a gisroads GeoPackage's
     road_centrelines) are
@@ -131,7 +134,7 @@ def train_job(image_path, roads_path, out_path, *, width_field: str | None = Non
         return _fine_tune_job(image, roads, out_path, image_path=image_path,
                               roads_path=roads_path, width_field=width_field, width_m=width_m,
                               guard_m=guard_m, seed=seed, base=base, steps=steps,
-                              progress=progress)
+                              check_share=check_share, progress=progress)
     try:
         import sklearn  # noqa: F401  (optional: checked here to say what is missing)
     except ImportError:
@@ -152,7 +155,7 @@ def train_job(image_path, roads_path, out_path, *, width_field: str | None = Non
 
 
 def _fine_tune_job(image, roads, out_path, *, image_path, roads_path, width_field, width_m,
-                   guard_m, seed, base, steps, progress) -> dict:
+                   guard_m, seed, base, steps, check_share, progress) -> dict:
     """The convolutional network fine-tuned on ``image`` with ``roads`` as labels, written
     as ONNX to ``out_path`` (see :func:`train_job`)."""
     try:
@@ -164,17 +167,27 @@ def _fine_tune_job(image, roads, out_path, *, image_path, roads_path, width_fiel
     steps = FINE_TUNE_STEPS if steps is None else steps
     if steps < 1:
         raise GisroadsError("the number of fine-tuning steps must be at least 1")
+    if not 0 <= check_share < 1:
+        raise GisroadsError(f"the share of roads left out to check the fine-tuning must be "
+                            f"at least 0 and below 1, not {check_share}")
     model, metadata = fine_tune_on_layer(image, roads, model=base, width_field=width_field,
                                          default_width_m=width_m, guard_m=guard_m,
-                                         steps=steps, seed=seed,
+                                         steps=steps, seed=seed, check_share=check_share,
                                          progress=scaled(progress, 0.0, 0.95))
     metadata = {**metadata, "image": Path(image_path).name, "width_field": width_field,
                 "roads": (Path(roads_path).name if not isinstance(roads_path, gpd.GeoDataFrame)
                           else "layer")}
     path = export_onnx(model, out_path, metadata)
     report(progress, 1.0, "done")
+    check = metadata.get("check")
+    if check is not None and check["kept"] == "base":
+        warnings.warn(
+            f"fine-tuning found less of the {check['held_out_roads']} roads left out to "
+            f"check it than the base model ({check['fine-tuned']:.2f} of their length "
+            f"against {check['base']:.2f}): {Path(path).name} is the base model",
+            stacklevel=2)
     return {"model": path, "steps": steps, "road_share": metadata["road_share"],
-            "roads": len(roads)}
+            "roads": len(roads), "check": check}
 
 
 def _segment_layer(frame: gpd.GeoDataFrame) -> gpd.GeoDataFrame:

@@ -45,6 +45,10 @@ FINE_TUNE_STEPS = 150
 """Optimiser steps of :func:`gisroads.learn.convnet_training.fine_tune_on_layer` (8 crops of
 224 working pixels each): about 25 passes over a 1500 x 1500 tile at 1 m, about a minute on
 two CPU cores (figures in docs/imagery.md)."""
+CHECK_SHARE = 0.2
+"""Share of a road layer's length (whole roads, seeded) that
+:func:`gisroads.learn.convnet_training.fine_tune_on_layer` leaves out of the training, to
+check the fine-tuned model against the base model on them."""
 
 
 @dataclass(frozen=True)

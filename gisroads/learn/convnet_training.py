@@ -16,6 +16,7 @@ place in the library that imports torch.
 """
 from __future__ import annotations
 
+import copy
 import inspect
 import io
 import json
@@ -35,8 +36,8 @@ except ImportError as error:  # pragma: no cover - the message is the point
                       "pip install 'gisroads[train]'") from error
 
 from ..errors import GisroadsError
-from ..progress import Progress, report
-from .convnet import FINE_TUNE_STEPS, network_input, normalisation
+from ..progress import Progress, report, scaled
+from .convnet import CHECK_SHARE, FINE_TUNE_STEPS, network_input, normalisation
 
 WIDTHS = (16, 32, 64, 128, 192)
 """Channels at 1/2, 1/4, 1/8, 1/16 and 1/32 of the working grid."""
@@ -405,12 +406,50 @@ def _working_grid(image, pixel_m: float):
     return ((scaled - low) / (high - low)).astype(np.float32), valid, grid
 
 
+#: Fewest roads a layer needs before some are held out for the check.
+CHECK_MIN_ROADS = 5
+#: A held-out road is found where the check's network runs within this of it, metres.
+CHECK_BUFFER_M = 4.0
+
+
+def held_out_roads(roads, share: float, seed: int) -> np.ndarray:
+    """Whole roads of a layer, in a seeded random order, until ``share`` of its length is
+    reached (bool per feature; none for ``share`` 0 or fewer than :data:`CHECK_MIN_ROADS`
+    roads)."""
+    length = np.asarray(roads.geometry.length, float)
+    held = np.zeros(len(roads), dtype=bool)
+    if share <= 0 or len(roads) < CHECK_MIN_ROADS:
+        return held
+    order = np.random.default_rng(seed).permutation(len(roads))
+    upto = np.searchsorted(np.cumsum(length[order]), share * length.sum()) + 1
+    held[order[:upto]] = True
+    return held
+
+
+def _check(probabilities: dict, grid, valid: np.ndarray, roads, threshold: float) -> dict:
+    """Per model: the share of ``roads`` (the held-out ones) that the network stage finds on
+    its probability at ``threshold`` (completeness at :data:`CHECK_BUFFER_M`)."""
+    from ..evaluate import buffer_metrics
+    from ..geo import GeoRaster
+    from ..network.rasters import raster_to_network
+
+    crs = grid.image.crs
+    truth = roads.to_crs(crs) if roads.crs is not None and crs is not None else roads
+    found = {}
+    for name, p in probabilities.items():
+        network = raster_to_network(GeoRaster(np.where(valid, p, np.nan), grid.transform, crs),
+                                    threshold=threshold, method="check")
+        found[name] = round(buffer_metrics(network.centrelines, truth,
+                                           buffer_m=CHECK_BUFFER_M).completeness, 4)
+    return found
+
+
 def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
                        width_field: str | None = None, default_width_m: float = 6.0,
                        guard_m: float = 5.0, core_fraction: float = 1.0,
                        steps: int = FINE_TUNE_STEPS, learning_rate: float = 3e-4,
-                       off_layer: str = "base", seed: int = 0,
-                       progress: Progress = None) -> tuple[RoadUNet, dict]:
+                       off_layer: str = "base", check_share: float = CHECK_SHARE,
+                       seed: int = 0, progress: Progress = None) -> tuple[RoadUNet, dict]:
     """Fine-tune the convolutional road model on an image with a road layer as labels (the
     road-database update case).
 
@@ -442,13 +481,23 @@ def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
         and a network taught that its missing roads are background learns to miss them;
         taught its own view it keeps them and learns the image's roads from the layer.
         ``"background"``: non-road, for a layer known to be complete.
+    check_share : float
+        Share of the layer's length (whole roads, :func:`held_out_roads`) left out of the
+        training. On them the fine-tuned model is checked against the base model: the
+        network stage runs on each one's probability at the model's threshold, and the
+        fine-tuned model is kept when it finds at least as much of those roads' length
+        (:data:`CHECK_BUFFER_M`); otherwise the base model is returned, since a layer to
+        update is the case where the network must find the roads it was not shown. 0: no
+        check, every road trains.
     seed : int
 
     Returns
     -------
     (RoadUNet, dict)
         The fine-tuned model and its metadata (the base model's with ``trained_on``,
-        ``road_share`` and ``fine_tune_steps``).
+        ``road_share``, ``fine_tune_steps`` and, with a check, ``check``: the two models'
+        figures and which was ``kept``); or, when the check keeps it, the base model and
+        its own metadata with ``road_share`` and ``check``.
     """
     from .convnet import DEFAULT_CONVNET_PATH
     from .training import ROAD_LAYER, layer_labels
@@ -456,25 +505,42 @@ def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
     base, metadata = model_from_onnx(model if model is not None else DEFAULT_CONVNET_PATH)
     report(progress, 0.0, "reading the image on the model's grid")
     bands, valid, grid = _working_grid(image, float(metadata["pixel_m"]))
-    positive, negative = layer_labels(grid, roads, width_m=width_m, width_field=width_field,
-                                      default_width_m=default_width_m, guard_m=guard_m,
-                                      core_fraction=core_fraction)
+    options = dict(width_m=width_m, width_field=width_field, default_width_m=default_width_m,
+                   guard_m=guard_m, core_fraction=core_fraction)
+    held = held_out_roads(roads, check_share, seed)
+    positive, negative = layer_labels(grid, roads[~held], **options)
+    if held.any():
+        negative &= layer_labels(grid, roads, **options)[1]
     if not (positive & valid).any():
         raise GisroadsError("no road of the layer lies on the image")
     bands = np.clip(bands, -0.5, 1.5)
     if off_layer not in ("base", "background"):
         raise GisroadsError(f"off_layer must be 'base' or 'background', not {off_layer!r}")
     target = positive & valid
-    if off_layer == "base":
+    whole = [LabelledTile(bands, positive, valid, "layer")]
+    seen = None
+    if off_layer == "base" or held.any():
         report(progress, 0.02, "reading the image with the base model")
-        seen = predict_tiles(base, [LabelledTile(bands, positive, valid, "layer")])[0]
+        seen = predict_tiles(base, whole)[0]
+    if off_layer == "base":
         target = np.where(target, 1.0, seen).astype(np.float32)
     tile = LabelledTile(bands, target, valid & (positive | negative), "layer")
     tuned = train_convnet([tile], steps=steps, batch=8, crop_px=224,
-                          learning_rate=learning_rate, seed=seed, model=base,
+                          learning_rate=learning_rate, seed=seed, model=copy.deepcopy(base),
                           freeze_batchnorm=True, scale_range=(0.8, 1.25), nodata_share=0.0,
-                          progress=progress)
+                          progress=scaled(progress, 0.0, 0.95 if held.any() else 1.0))
     road_share = float(positive[valid].mean())
-    return tuned, {**metadata, "trained_on": ROAD_LAYER, "road_share": round(road_share, 4),
-                   "fine_tune_steps": steps, "fine_tune_seed": seed,
-                   "off_layer": off_layer}
+    tuned_metadata = {**metadata, "trained_on": ROAD_LAYER, "road_share": round(road_share, 4),
+                      "fine_tune_steps": steps, "fine_tune_seed": seed,
+                      "off_layer": off_layer}
+    if not held.any():
+        return tuned, tuned_metadata
+    report(progress, 0.95, "checking the fine-tuned model on the roads left out")
+    figures = _check({"base": seen, "fine-tuned": predict_tiles(tuned, whole)[0]}, grid,
+                     valid, roads[held], float(metadata["threshold"]))
+    kept = "fine-tuned" if figures["fine-tuned"] >= figures["base"] else "base"
+    report(progress, 1.0, f"kept the {kept} model")
+    verdict = {**figures, "held_out_roads": int(held.sum()), "kept": kept}
+    return ((tuned, {**tuned_metadata, "check": verdict}) if kept == "fine-tuned"
+            else (base, {**metadata, "road_share": tuned_metadata["road_share"],
+                         "check": verdict}))

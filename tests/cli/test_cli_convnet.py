@@ -82,7 +82,7 @@ def test_train_onnx_writes_a_network_image_takes(scene, bundled, tmp_path):
     pytest.importorskip("onnx")
     out = tmp_path / "m.onnx"
     trained = gisroads("train", scene / "image.tif", scene / "truth.gpkg", "-o", out,
-                       "--width-field", "width_m", "--steps", 2, "--json")
+                       "--width-field", "width_m", "--steps", 2, "--check", 0, "--json")
     assert trained.returncode == 0, trained.stderr
     summary = json.loads(trained.stdout)
     assert summary["model"] == str(out) and summary["steps"] == 2
@@ -110,7 +110,7 @@ def test_train_onnx_starts_from_the_base_network(scene, tmp_path):
                        {"pixel_m": 2.0, "threshold": 0.3, "note": "the base"})
     out = tmp_path / "tuned.onnx"
     assert main(["train", str(scene / "image.tif"), str(scene / "truth.gpkg"), "-o", str(out),
-                 "--base", str(base), "--steps", "1", "--json"]) == 0
+                 "--base", str(base), "--steps", "1", "--check", "0", "--json"]) == 0
     net = load_convnet(out)
     assert net.metadata["note"] == "the base" and net.pixel_m == 2.0
     assert net.threshold == 0.3 and net.metadata["fine_tune_steps"] == 1
@@ -123,6 +123,16 @@ def test_train_onnx_refuses_zero_steps(scene, tmp_path, capsys):
     assert status == 2
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "at least 1" in lines[0]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_train_onnx_refuses_a_check_share_outside_0_to_1(scene, tmp_path, capsys):
+    pytest.importorskip("torch")
+    status = main(["train", str(scene / "image.tif"), str(scene / "truth.gpkg"), "-o",
+                   str(tmp_path / "m.onnx"), "--check", "1.5"])
+    assert status == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "check the fine-tuning" in lines[0]
     assert list(tmp_path.iterdir()) == []
 
 

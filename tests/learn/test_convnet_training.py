@@ -11,7 +11,8 @@ pytest.importorskip("onnx")
 
 from gisroads.geo import GeoRaster  # noqa: E402
 from gisroads.learn import convnet_training as ct  # noqa: E402
-from gisroads.learn.convnet import convnet_probability, load_convnet  # noqa: E402
+from gisroads.learn.convnet import (DEFAULT_CONVNET_PATH, convnet_probability,  # noqa: E402
+                                    load_convnet)
 from gisroads.synthetic import make_scene, render_image  # noqa: E402
 
 METADATA = {"pixel_m": 1.0, "threshold": 0.5, "note": "test"}
@@ -207,7 +208,8 @@ def test_fine_tune_on_layer_trains_on_the_road_layer(exported, scene):
     calls = []
     tuned, metadata = ct.fine_tune_on_layer(
         GeoRaster(image.data[:3], image.transform, image.crs), scene.roads, model=base_path,
-        steps=20, seed=0, progress=lambda fraction, message: calls.append(fraction))
+        steps=20, seed=0, check_share=0.0,
+        progress=lambda fraction, message: calls.append(fraction))
     assert isinstance(tuned, ct.RoadUNet) and not tuned.training
     assert metadata["trained_on"] == "road layer"
     assert 0 < metadata["road_share"] < 0.5
@@ -228,13 +230,41 @@ def test_a_fine_tuned_model_is_a_run_time_model(exported, scene, tmp_path):
     _, base_path = exported
     scene, image = scene
     tuned, metadata = ct.fine_tune_on_layer(image, scene.roads, model=base_path, steps=2,
-                                            off_layer="background")
+                                            off_layer="background", check_share=0.0)
     assert metadata["off_layer"] == "background"
     path = ct.export_onnx(tuned, tmp_path / "tuned.onnx", metadata)
     net = load_convnet(path)
     assert net.metadata["trained_on"] == "road layer"
     p = convnet_probability(image, net)
     assert p.data.shape == image.shape and np.isfinite(p.data).all()
+
+
+def test_held_out_roads_are_whole_roads_to_the_share_and_seeded(scene):
+    scene, _ = scene
+    roads = scene.roads
+    held = ct.held_out_roads(roads, 0.2, seed=3)
+    share = roads.length[held].sum() / roads.length.sum()
+    assert held.dtype == bool and held.any() and not held.all()
+    assert 0.2 <= share < 0.2 + roads.length.max() / roads.length.sum()
+    assert (ct.held_out_roads(roads, 0.2, seed=3) == held).all()
+    assert not ct.held_out_roads(roads, 0.0, seed=3).any()
+    assert not ct.held_out_roads(roads.iloc[:ct.CHECK_MIN_ROADS - 1], 0.2, seed=3).any()
+
+
+def test_a_fine_tuning_that_finds_fewer_held_out_roads_gives_back_the_base(scene):
+    """A learning rate a hundred times too high wrecks the bundled network in a few steps:
+    the check on the roads left out sees it and the base model comes back, unchanged."""
+    scene, image = scene
+    rgb = GeoRaster(image.data[:3], image.transform, image.crs)
+    model, metadata = ct.fine_tune_on_layer(rgb, scene.roads, steps=4, learning_rate=0.05,
+                                            off_layer="background", seed=0)
+    check = metadata["check"]
+    assert check["kept"] == "base" and check["held_out_roads"] >= 1
+    assert check["fine-tuned"] < check["base"]
+    assert "trained_on" not in metadata
+    base, _ = ct.model_from_onnx(DEFAULT_CONVNET_PATH)
+    for name, value in base.state_dict().items():
+        assert torch.equal(value, model.state_dict()[name]), name
 
 
 def test_fine_tuning_needs_a_road_on_the_image(exported, scene):
