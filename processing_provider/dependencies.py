@@ -21,6 +21,7 @@ REQUIREMENTS = [
     ("numpy", "numpy", "1.24"),
     ("scipy", "scipy", "1.10"),
     ("skimage", "scikit-image", "0.19"),
+    ("networkx", "networkx", "2.8"),
     ("shapely", "shapely", "2.0"),
     ("geopandas", "geopandas", "0.12"),
     ("pyproj", "pyproj", "3.4"),
