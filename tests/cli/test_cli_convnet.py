@@ -116,23 +116,18 @@ def test_train_onnx_starts_from_the_base_network(scene, tmp_path):
     assert net.threshold == 0.3 and net.metadata["fine_tune_steps"] == 1
 
 
-def test_train_onnx_refuses_zero_steps(scene, tmp_path, capsys):
+@pytest.mark.parametrize("option, value, message", [
+    ("--steps", "0", "at least 1"),
+    ("--check", "1.5", "check the fine-tuning"),
+])
+def test_train_onnx_refuses_a_bad_option_in_one_line(scene, tmp_path, capsys, option, value,
+                                                      message):
     pytest.importorskip("torch")
     status = main(["train", str(scene / "image.tif"), str(scene / "truth.gpkg"), "-o",
-                   str(tmp_path / "m.onnx"), "--steps", "0"])
+                   str(tmp_path / "m.onnx"), option, value])
     assert status == 2
     lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and "at least 1" in lines[0]
-    assert list(tmp_path.iterdir()) == []
-
-
-def test_train_onnx_refuses_a_check_share_outside_0_to_1(scene, tmp_path, capsys):
-    pytest.importorskip("torch")
-    status = main(["train", str(scene / "image.tif"), str(scene / "truth.gpkg"), "-o",
-                   str(tmp_path / "m.onnx"), "--check", "1.5"])
-    assert status == 2
-    lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and "check the fine-tuning" in lines[0]
+    assert len(lines) == 1 and message in lines[0]
     assert list(tmp_path.iterdir()) == []
 
 
