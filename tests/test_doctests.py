@@ -20,6 +20,7 @@ MODULES = [
     "gisroads.evaluate.report",
     "gisroads.imagery.pipeline",
     "gisroads.io.raster",
+    "gisroads.network.areas",
     "gisroads.network.branches",
     "gisroads.io.vector",
     "gisroads.lidar.blocks",

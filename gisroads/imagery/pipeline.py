@@ -459,7 +459,7 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
                if isinstance(model, RoadModel) and trained_on_road_layer(model) else None)
         network = raster_to_network(probability, threshold=probability_threshold,
                                     method=PROBABILITY_METHOD,
-                                    part_options={"low_threshold": low},
+                                    part_options={"low_threshold": low}, wide_areas=True,
                                     progress=scaled(progress, 0.15, 1.0))
         lap("network")
         network.centrelines["cues"] = "model"

@@ -146,6 +146,7 @@ from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..io.las import (BRIDGE_DECK_CLASS, GROUND_CLASS, NOISE_CLASSES, NOT_ROAD_CLASSES,
                       ROAD_SURFACE_CLASS, PointCloud)
+from ..network.rasters import without_lines
 from ..progress import Progress, report
 from .intensity import auto_cell_m, image_grid, split_share
 
@@ -1037,24 +1038,7 @@ def without_flanked_roads(likelihood: GeoRaster, centrelines, flanks: dict, *,
         hit = ~found & (measured >= max_share)
         reason[hit], share[hit], found = name, measured[hit], found | hit
     taken = centrelines[found].assign(reason=reason[found], flank_share=share[found])
-    return without_roads(likelihood, taken, margin_m=margin_m), taken
-
-
-def without_roads(likelihood: GeoRaster, roads, *, margin_m: float = 1.0) -> GeoRaster:
-    """A copy of the likelihood with the band ``width / 2 + margin_m`` (metres) of each of
-    ``roads`` (LineStrings with ``width_m``, in its CRS) set to 0, NaN cells kept: run the
-    network stage again on it and the roads are gone, the roads they touched joined and
-    split as if they had never been there."""
-    from rasterio import features
-
-    data = np.array(likelihood.data, dtype=np.float32, copy=True)
-    if len(roads):
-        bands = shapely.buffer(roads.geometry.values,
-                               roads["width_m"].to_numpy(float) / 2 + margin_m)
-        erase = features.rasterize(list(bands), out_shape=data.shape,
-                                   transform=likelihood.transform).astype(bool)
-        data[erase & np.isfinite(data)] = 0.0
-    return GeoRaster(data, likelihood.transform, likelihood.crs, nodata=likelihood.nodata)
+    return without_lines(likelihood, taken, margin_m=margin_m), taken
 
 
 def without_car_park_aisles(likelihood: GeoRaster, centrelines, vehicles: GeoRaster, *,

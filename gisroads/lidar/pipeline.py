@@ -41,13 +41,12 @@ from ..parallel import NOT_KEPT, for_each_result, keep_result, kept_result, shar
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.branches import branches_into
-from ..network.rasters import raster_to_network
+from ..network.rasters import raster_to_network, without_lines
 from ..tiling.tiles import OVERLAP_M, TILE_M, Tile, stitch_tiles
 from ..tiling.tilestore import (TileStore, code_fingerprint, digest, file_digest, inputs_crs,
                                 las_inputs, open_store)
 from .evidence import (CAR_PARK_FLANK_SHARE, FLANK_DEPTH_M, FLANK_GAP_M, SHORE_FLANK_SHARE,
-                       dropout_cells, road_evidence, vehicle_cells, without_flanked_roads,
-                       without_roads)
+                       dropout_cells, road_evidence, vehicle_cells, without_flanked_roads)
 from .ground import GroundPlanes, ground_planes
 from .learned import (evidence_features, fit_evidence_model, learned_likelihood,
                       load_evidence_model)
@@ -585,7 +584,7 @@ def without_car_park_accesses(likelihood: GeoRaster, centrelines: gpd.GeoDataFra
     car_park = shapely.union_all(shapely.buffer(aisles.geometry.values, reach))
     taken = branches_into(centrelines.geometry.values, car_park)
     accesses = centrelines[taken].assign(reason="car-park access")
-    return without_roads(likelihood, accesses), accesses
+    return without_lines(likelihood, accesses), accesses
 
 
 def service_lines(lines: gpd.GeoDataFrame) -> gpd.GeoDataFrame:

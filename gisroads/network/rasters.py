@@ -62,6 +62,7 @@ from ..progress import Progress, report, scaled
 from ..vectorize.regions import segment_polygons
 from ..vectorize.ribbons import node_roads
 from ..vectorize.skeleton import skeleton_lines
+from .areas import WIDE_AREA_M, lines_in_wide_areas, wide_paved_areas
 from .cuts import MAX_CUT_M, bridge_cuts
 from .junctions import merge_close_junctions, strings_to_network
 from .subgraph import edge_weights, gap_edges, road_strings, select_gap_edges
@@ -86,7 +87,7 @@ STRAIGHTEN = 1.5
 #: Douglas-Peucker tolerance of the centre lines, metres.
 SIMPLIFY_M = 0.5
 #: Parts wider than this are no road: a six-lane arterial with its median is about 35 m.
-MAX_WIDTH_M = 40.0
+MAX_WIDTH_M = WIDE_AREA_M
 #: Isolated lines shorter than this are dropped, metres.
 MIN_LENGTH_M = 10.0
 #: An isolated string shorter than this many times its width is a blob, not a road.
@@ -638,10 +639,31 @@ def parts_to_network(parts: gpd.GeoDataFrame, *, extent, crs, method: str = METH
     return network
 
 
+def without_lines(raster: GeoRaster, lines, *, margin_m: float = 1.0,
+                  area=None) -> GeoRaster:
+    """A copy of a road raster with the band ``width / 2 + margin_m`` (metres) of each of
+    ``lines`` (LineStrings with ``width_m``, in its CRS) set to 0, and ``area`` (a shapely
+    geometry, optional) too, NaN cells kept: run the network stage again on it and the
+    lines are gone, the roads they touched joined and split as if they had never been
+    there."""
+    from rasterio import features
+
+    data = np.array(raster.data, dtype=np.float32, copy=True)
+    shapes = list(shapely.buffer(lines.geometry.values,
+                                 lines["width_m"].to_numpy(float) / 2 + margin_m))
+    if area is not None and not area.is_empty:
+        shapes.append(area)
+    if shapes:
+        erase = features.rasterize(shapes, out_shape=data.shape,
+                                   transform=raster.transform).astype(bool)
+        data[erase & np.isfinite(data)] = 0.0
+    return GeoRaster(data, raster.transform, raster.crs, nodata=raster.nodata)
+
+
 def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = THRESHOLD,
                       method: str = METHOD, part_options: dict | None = None,
                       gap_options: dict | None = None, weight_options: dict | None = None,
-                      network_options: dict | None = None,
+                      network_options: dict | None = None, wide_areas: bool = False,
                       progress: Progress = None) -> RoadNetwork:
     """A road raster (mask or probability) to the road-network contract.
 
@@ -659,6 +681,10 @@ def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = TH
         Keyword arguments of :func:`skeleton_parts`.
     gap_options, weight_options, network_options : dict, optional
         See :func:`parts_to_network`.
+    wide_areas : bool
+        Take out the lines drawn in wide paved areas (car parks, plazas: their outlines,
+        aisles and accesses, :mod:`gisroads.network.areas`) and build the network again
+        without them; they go to ``rejected`` with the reason "wide paved area".
     progress : callable, optional
         ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
 
@@ -697,15 +723,35 @@ def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = TH
     (True, True)
     """
     probability = road_probability(raster, band=band)
+    options = dict(threshold=threshold, method=method, part_options=part_options,
+                   gap_options=gap_options, weight_options=weight_options,
+                   network_options=network_options)
+    end = 0.7 if wide_areas else 1.0
     parts = skeleton_parts(probability, threshold=threshold, **(part_options or {}),
-                           progress=scaled(progress, 0.0, 0.6))
+                           progress=scaled(progress, 0.0, 0.6 * end))
     low = (part_options or {}).get("low_threshold")
     network = parts_to_network(
         parts, extent=probability.bounds, crs=probability.crs, method=method,
         observed=_observed(probability), probability=probability,
         unsupported=_off_road_length(probability, threshold if low is None else low),
         gap_options=gap_options, weight_options=weight_options,
-        network_options=network_options, progress=scaled(progress, 0.6, 1.0))
+        network_options=network_options, progress=scaled(progress, 0.6 * end, end))
     network.qa["rejected"] = _rejected(parts.geometry.values,
                                        network.centrelines.geometry.values, probability.crs)
+    if wide_areas and len(network.centrelines):
+        area = wide_paved_areas(probability, threshold if low is None else low)
+        taken = lines_in_wide_areas(network.centrelines.geometry.values, area,
+                                    extent=shapely.box(*probability.bounds))
+        if taken.any():
+            paved, roads = network.centrelines[taken], network.centrelines[~taken]
+            # the rest of the area too, or its remnants beside the roads through it draw
+            # their own lines
+            rest = shapely.difference(area, shapely.union_all(shapely.buffer(
+                roads.geometry.values, roads["width_m"].to_numpy(float) / 2 + 1.0)))
+            network = raster_to_network(without_lines(probability, paved, area=rest),
+                                        **options, progress=scaled(progress, end, 1.0))
+            network.qa["rejected"] = pd.concat([network.qa["rejected"], gpd.GeoDataFrame(
+                {"reason": np.full(len(paved), "wide paved area", dtype=object),
+                 "length_m": shapely.length(paved.geometry.values)},
+                geometry=paved.geometry.values, crs=probability.crs)], ignore_index=True)
     return network

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import rasterio
 import rasterio.features
+import shapely
 from rasterio.enums import ColorInterp
 
 from gisroads.errors import NoRoadFoundWarning
@@ -90,6 +91,11 @@ def test_a_half_empty_image_gives_roads_only_over_its_data(scene, half_empty, tm
             assert frame.total_bounds[0] >= edge - reach, layer
             assert frame.total_bounds[2] <= xmax + reach, layer
     assert result["roads"] > 0 and lines.length.sum() > 100
+    # and none is drawn along the edge of the data: only roads that cross it come near it
+    along_edge = shapely.box(edge - TOLERANCE_M, image.bounds[1] + 2 * TOLERANCE_M,
+                             edge + TOLERANCE_M + 1, image.bounds[3] - 2 * TOLERANCE_M)
+    near = shapely.length(shapely.intersection(lines.geometry.values, along_edge)).sum()
+    assert near < 0.05 * lines.length.sum()
 
 
 def test_road_colour_mask_of_a_half_empty_image(scene):
