@@ -26,7 +26,8 @@ from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutpu
                        QgsProcessingProvider)
 
 from .algorithms.base import (add_scene_parameters, background_output, city_blocks_parameters,
-                              lidar_model_input, train_parameters, workers_parameter)
+                              group_id, lidar_model_input, train_parameters,
+                              workers_parameter)
 from .algorithms.compare_database import CompareWithRoadDatabase
 from .algorithms.curb_attractor import CurbAttractorMap
 from .algorithms.evaluate_network import EvaluateRoadNetwork
@@ -71,7 +72,7 @@ class _ExternalAlgorithm(QgsProcessingAlgorithm):
         return self.GROUP
 
     def groupId(self):  # noqa: N802
-        return self.GROUP.lower()
+        return group_id(self.GROUP)
 
     def shortHelpString(self):  # noqa: N802
         return (f"<p>{self.HELP}, by running the external gisroads command "

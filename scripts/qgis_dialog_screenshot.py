@@ -4,7 +4,8 @@ Run by ``scripts/qgis_dialog_screenshot.sh`` inside ``qgis --code`` under Xvfb (
 the usual way: the system Python, the plugin from its zip in a throwaway profile), so what a
 user sees can be looked at on a machine without a display. Settings come from the
 environment: ``SHOT_ALGORITHM`` (e.g. ``gisroads:lidarroadnetwork``), ``SHOT_PARAMETERS`` (a
-JSON object) and ``SHOT_DIR`` (where ``dialog.png``, ``window_before_run.png`` (the main
+JSON object) and ``SHOT_DIR`` (where ``toolbox.png`` (the Processing toolbox filtered to
+gisroads, every group open), ``dialog.png``, ``window_before_run.png`` (the main
 window with its message bar), ``dialog_after_run.png``,
 ``window_after_run.png`` (the main window: the layers the run loaded, on the map and in the
 layer tree) and ``shot.log`` go).
@@ -15,8 +16,8 @@ from pathlib import Path
 
 import processing
 from qgis.core import QgsApplication, QgsProject
-from qgis.PyQt.QtCore import QTimer
-from qgis.utils import iface
+from qgis.PyQt.QtCore import QModelIndex, Qt, QTimer
+from qgis.utils import iface, plugins
 
 OUT = Path(os.environ["SHOT_DIR"])
 ALGORITHM = os.environ["SHOT_ALGORITHM"]
@@ -26,6 +27,30 @@ PARAMETERS = json.loads(os.environ.get("SHOT_PARAMETERS", "{}"))
 def _log(text: str) -> None:
     with open(OUT / "shot.log", "a") as log:
         log.write(text + "\n")
+
+
+def _toolbox_rows(tree, index=QModelIndex(), depth: int = 0) -> list:
+    model, rows = tree.model(), []
+    for row in range(model.rowCount(index)):
+        child = model.index(row, 0, index)
+        rows.append("  " * depth + model.data(child, Qt.DisplayRole))
+        rows += _toolbox_rows(tree, child, depth + 1)
+    return rows
+
+
+def _show_toolbox() -> None:
+    toolbox = plugins["processing"].toolbox
+    toolbox.show()
+    toolbox.searchBox.setText("gisroads")
+    toolbox.algorithmTree.expandAll()
+
+    def grab() -> None:
+        _log("toolbox: " + json.dumps(_toolbox_rows(toolbox.algorithmTree)))
+        toolbox.grab().save(str(OUT / "toolbox.png"))
+        toolbox.hide()
+        _open_dialog()
+
+    QTimer.singleShot(1500, grab)
 
 
 def _open_dialog() -> None:
@@ -67,4 +92,4 @@ def _open_dialog() -> None:
 
 
 # after QGIS has loaded its plugins and providers
-QTimer.singleShot(8000, _open_dialog)
+QTimer.singleShot(8000, _show_toolbox)

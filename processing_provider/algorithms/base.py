@@ -16,6 +16,12 @@ from qgis.core import (QgsFeatureSink, QgsProcessing, QgsProcessingAlgorithm,
 from qgis.PyQt.QtCore import QCoreApplication
 
 
+
+def group_id(group: str) -> str:
+    """The toolbox group id of a group name: one per name, in-process and external, or the
+    toolbox shows a group twice."""
+    return group.lower().replace(" ", "")
+
 class GisroadsAlgorithm(QgsProcessingAlgorithm):
     """Subclasses set ``NAME``, ``DISPLAY_NAME``, ``GROUP`` and ``HELP`` (HTML), and a
     stage of a method's pipeline its ``STAGE``."""
@@ -44,7 +50,7 @@ class GisroadsAlgorithm(QgsProcessingAlgorithm):
         return self.tr(self.GROUP)
 
     def groupId(self):  # noqa: N802
-        return self.GROUP.lower().replace(" ", "")
+        return group_id(self.GROUP)
 
     def shortHelpString(self):  # noqa: N802
         return self.tr(self.HELP)

@@ -168,28 +168,67 @@ def Qt_children():  # noqa: N802
 
 DESKTOP_PROBE = r"""
 import json
+from pathlib import Path
 from qgis.core import QgsApplication
-from qgis.PyQt.QtCore import QTimer
+from qgis.PyQt.QtCore import QModelIndex, QTimer, Qt
 from qgis.PyQt.QtWidgets import QApplication, QPushButton
-from qgis.utils import iface
+from qgis.utils import iface, plugins
+
+seen = {}
+
+def toolbox_rows(tree, index=QModelIndex(), depth=0):
+    model, rows = tree.model(), []
+    for row in range(model.rowCount(index)):
+        child = model.index(row, 0, index)
+        rows.append("  " * depth + model.data(child, Qt.DisplayRole))
+        rows += toolbox_rows(tree, child, depth + 1)
+    return rows
+
+def first_use_dialog():
+    dialogs = [w for w in QApplication.topLevelWidgets()
+               if w.isVisible() and w is not iface.mainWindow() and w.windowTitle()]
+    seen["first_use"] = [dialog.windowTitle() for dialog in dialogs]
+    for dialog in dialogs:
+        dialog.grab().save(str(Path(OUT).parent / "first_use.png"))
+        dialog.close()
 
 def report():
-    dialogs = [w.windowTitle() for w in QApplication.topLevelWidgets()
-               if w.isVisible() and w is not iface.mainWindow()]
-    items = [[item.title(), item.text(), [b.text() for b in item.findChildren(QPushButton)]]
-             for item in iface.messageBar().items()]
-    providers = [p.id() for p in QgsApplication.processingRegistry().providers()]
+    seen["dialogs"] = [w.windowTitle() for w in QApplication.topLevelWidgets()
+                       if w.isVisible() and w is not iface.mainWindow()]
+    items = [item for item in iface.messageBar().items()]
+    seen["bar"] = [[item.title(), item.text(), [b.text() for b in item.findChildren(QPushButton)]]
+                   for item in items]
+    seen["providers"] = [p.id() for p in QgsApplication.processingRegistry().providers()]
+    toolbox = plugins["processing"].toolbox
+    toolbox.show()
+    toolbox.searchBox.setText("gisroads")
+    toolbox.algorithmTree.expandAll()
+    QTimer.singleShot(1500, lambda: after_toolbox(items))
+
+def after_toolbox(items):
+    toolbox = plugins["processing"].toolbox
+    seen["toolbox"] = toolbox_rows(toolbox.algorithmTree)
+    iface.mainWindow().grab().save(str(Path(OUT).parent / "window.png"))
+    buttons = [b for item in items if item.title() == "gisroads"
+               for b in item.findChildren(QPushButton)]
+    QTimer.singleShot(3000, first_use_dialog)
+    if buttons:
+        buttons[0].click()  # the set-up dialog is modal: this returns when it is closed
     with open(OUT, "w") as f:
-        json.dump({"dialogs": dialogs, "bar": items, "providers": providers}, f)
+        json.dump(seen, f)
     QApplication.instance().exit(0)
 
 QTimer.singleShot(6000, report)
+QTimer.singleShot(120000, lambda: QApplication.instance().exit(3))  # never hang the suite
 """
 
 
 def test_the_desktop_starts_with_one_message_and_no_error_dialog(plain_qgis_process,
                                                                   tmp_path):
-    """QGIS started the usual way (its own Python, a virtual display), plugin enabled."""
+    """QGIS started the usual way (its own Python, a virtual display), plugin enabled: one
+    message in the bar, the toolbox's gisroads group with *Set up gisroads* alone, and the
+    bar's button opens the set-up (the first-use dialog). Screenshots in the test's folder:
+    window.png (the bar and the toolbox), first_use.png."""
     if shutil.which("xvfb-run") is None:
         if os.environ.get("GISROADS_REQUIRE_QGIS"):
             pytest.fail("xvfb-run missing: run scripts/setup.sh")
@@ -211,6 +250,11 @@ def test_the_desktop_starts_with_one_message_and_no_error_dialog(plain_qgis_proc
     assert text.startswith("the algorithms need gisroads' own Python environment: QGIS's "
                            "Python lacks shapely>=2.0 (found 1.")
     assert buttons == ["Set up gisroads…"]
+    assert [row.strip() for row in seen["toolbox"]] == ["gisroads", "Set-up",
+                                                         "Set up gisroads"]
+    assert seen["first_use"] == ["Set up gisroads"]
+    for shot in ("window.png", "first_use.png"):
+        assert (tmp_path / shot).stat().st_size > 10_000, shot
 
 
 def external_gisroads() -> str:
@@ -350,9 +394,10 @@ def test_external_mode_cancel_stops_the_command_and_leaves_nothing(qgis_app, tmp
 ])
 def test_desktop_dialog_runs_the_pipeline_through_external_gisroads(
         plugin_zip, lidar_dir, tmp_path, algorithm, input_name, background):
-    """The QGIS desktop under Xvfb, started the usual way (system Python), the algorithm's
-    dialog opened, run and grabbed before and after (scripts/qgis_dialog_screenshot.sh);
-    the roads are loaded ticked over their input, the QA layers unticked."""
+    """The QGIS desktop under Xvfb, started the usual way (system Python): the toolbox lists
+    every gisroads algorithm; the algorithm's dialog opened, run and grabbed before and
+    after (scripts/qgis_dialog_screenshot.sh); the roads are loaded ticked over their
+    input, the QA layers unticked."""
     from skimage.io import imread
 
     env = {**os.environ, "GISROADS_EXECUTABLE": external_gisroads(),
@@ -377,6 +422,12 @@ def test_desktop_dialog_runs_the_pipeline_through_external_gisroads(
                  "window_after_run.png"):
         image = imread(tmp_path / name)
         assert image.shape[0] > 400 and image.shape[1] > 600 and image.std() > 20
+    (toolbox,) = [json.loads(line[len("toolbox: "):]) for line in done.stdout.splitlines()
+                  if line.startswith("toolbox: ")]
+    algorithms = [row.strip() for row in toolbox if row.startswith("    ")]
+    assert len(algorithms) >= 25 and "LiDAR road network (Zhu & Mordohai)" in algorithms
+    assert "Imagery road network (Grote & Rottensteiner)" in algorithms
+    assert imread(tmp_path / "toolbox.png").std() > 20
     (layers,) = [json.loads(line[len("layers: "):]) for line in done.stdout.splitlines()
                  if line.startswith("layers: ")]
     assert [f"{input_name} – road centre lines", True] in layers

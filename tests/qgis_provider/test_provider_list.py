@@ -26,3 +26,19 @@ def test_the_provider_lists_every_algorithm_once(qgis_app):
     assert len(listed) == len(set(listed))
     assert set(listed) == _defined_algorithms()
     assert len({cls.NAME for cls in ALGORITHMS}) == len(ALGORITHMS)
+
+
+def test_a_group_has_one_id_in_the_toolbox_in_both_modes(qgis_app):
+    """In-process and external algorithms of one group share its id, or the toolbox shows
+    the group twice (the desktop's external toolbox did, for Map-guided snakes)."""
+    from processing_provider.external import ExternalProvider
+    from processing_provider.provider import GisroadsProvider
+
+    for provider in (GisroadsProvider(), ExternalProvider("/opt/gisroads/bin/gisroads")):
+        provider.loadAlgorithms()
+        ids = {}
+        for algorithm in provider.algorithms():
+            ids.setdefault(algorithm.group(), set()).add(algorithm.groupId())
+        assert len(ids) >= 6
+        assert all(len(group_ids) == 1 for group_ids in ids.values()), ids
+        assert ids["Map-guided snakes"] == {"map-guidedsnakes"}
