@@ -331,10 +331,11 @@ class ExternalTrainRoadModel(_ExternalAlgorithm):
             "the command's environment to have PyTorch: pip install 'gisroads[train]')")
     OUTPUT_HELP = "Output: the model file, for the Imagery road network's model."
     #: ``gisroads train``'s defaults (a test compares them with the in-process algorithm's).
-    WIDTH_M, GUARD_M, SAMPLES, STEPS = 6.0, 5.0, 100000, 150
+    WIDTH_M, GUARD_M, SAMPLES, STEPS, CHECK = 6.0, 5.0, 100000, 150, 0.2
 
     def parameters(self):
-        return train_parameters(str, self.WIDTH_M, self.GUARD_M, self.SAMPLES, self.STEPS)
+        return train_parameters(str, self.WIDTH_M, self.GUARD_M, self.SAMPLES, self.STEPS,
+                                self.CHECK)
 
     def initAlgorithm(self, config=None):  # noqa: N802
         super().initAlgorithm(config)
@@ -354,7 +355,8 @@ class ExternalTrainRoadModel(_ExternalAlgorithm):
             "--width", str(self.parameterAsDouble(parameters, "WIDTH", context)),
             "--guard", str(self.parameterAsDouble(parameters, "GUARD", context)),
             "--samples", str(self.parameterAsInt(parameters, "SAMPLES", context)),
-            "--steps", str(self.parameterAsInt(parameters, "STEPS", context))], feedback)
+            "--steps", str(self.parameterAsInt(parameters, "STEPS", context)),
+            "--check", str(self.parameterAsDouble(parameters, "CHECK", context))], feedback)
         return {"OUTPUT": result["model"], "SAMPLES_USED": result.get("samples", 0),
                 "ROAD_SHARE": result["road_share"]}
 

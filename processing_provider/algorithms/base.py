@@ -342,7 +342,8 @@ def city_blocks_parameters(tr, spacing_m: float, max_edge_m: float) -> list:
     ]
 
 
-def train_parameters(tr, width_m: float, guard_m: float, samples: int, steps: int) -> list:
+def train_parameters(tr, width_m: float, guard_m: float, samples: int, steps: int,
+                     check_share: float) -> list:
     """``(parameter, help)`` of *Train road model* (in-process and external), with the
     defaults of ``gisroads train``."""
     return [
@@ -376,6 +377,13 @@ def train_parameters(tr, width_m: float, guard_m: float, samples: int, steps: in
                                       QgsProcessingParameterNumber.Integer,
                                       steps, minValue=1),
          "network (.onnx) only: optimiser steps of 8 crops; more steps, longer training"),
+        (QgsProcessingParameterNumber("CHECK", tr("Share of roads left out to check"),
+                                      QgsProcessingParameterNumber.Double, check_share,
+                                      minValue=0.0, maxValue=0.9),
+         "network (.onnx) only: this share of the layer's road length (whole roads) is "
+         "left out of the fine-tuning; the fine-tuned and the bundled network are compared "
+         "on it and the one that finds more of it is written; 0: every road is trained on, "
+         "no check"),
         (QgsProcessingParameterFileDestination(
             "OUTPUT", tr("Road model"),
             tr("Road network (*.onnx);;Boosted trees (*.npz)")),

@@ -2,7 +2,7 @@
 from qgis.core import QgsProcessingOutputNumber
 
 from gisroads.jobs import stage_default, train_job
-from gisroads.learn.convnet import FINE_TUNE_STEPS
+from gisroads.learn.convnet import CHECK_SHARE, FINE_TUNE_STEPS
 
 from ..convert import gisroads_errors, progress_callback, source_to_frame
 from .base import GisroadsAlgorithm, train_parameters
@@ -29,15 +29,15 @@ class TrainRoadModel(GisroadsAlgorithm):
         "multiscale colour, texture and line features in metres, calibrated to the share of "
         "the image the roads cover (a model archive of plain arrays). Cancelling stops "
         "between steps.</p>"
-        "<p>The network is checked before it is written: a fifth of the layer's road length "
-        "is left out of the fine-tuning, and where the bundled network finds more of those "
-        "roads than the fine-tuned one, the bundled network is written (with a warning): "
-        "fine-tuning then did not help on this image.</p>")
+        "<p>The network is checked before it is written: a share of the layer's road length "
+        "(a fifth by default) is left out of the fine-tuning, and where the bundled network "
+        "finds more of those roads than the fine-tuned one, the bundled network is written "
+        "(with a warning): fine-tuning then did not help on this image.</p>")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add_parameters(train_parameters(
             self.tr, stage_default(train_job, "width_m"), stage_default(train_job, "guard_m"),
-            stage_default(train_job, "samples"), FINE_TUNE_STEPS))
+            stage_default(train_job, "samples"), FINE_TUNE_STEPS, CHECK_SHARE))
         self.addOutput(QgsProcessingOutputNumber("SAMPLES_USED",
                                                  self.tr("Samples used (boosted trees)")))
         self.addOutput(QgsProcessingOutputNumber("ROAD_SHARE",
@@ -57,6 +57,7 @@ class TrainRoadModel(GisroadsAlgorithm):
                 guard_m=self.parameterAsDouble(parameters, "GUARD", context),
                 samples=self.parameterAsInt(parameters, "SAMPLES", context),
                 steps=self.parameterAsInt(parameters, "STEPS", context),
+                check_share=self.parameterAsDouble(parameters, "CHECK", context),
                 progress=progress_callback(feedback))
         if "trees" in result:
             feedback.pushInfo(f"model of {result['trees']} trees from {result['samples']} "

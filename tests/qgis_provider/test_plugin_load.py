@@ -549,3 +549,40 @@ def test_external_and_in_process_training_give_the_same_model(run_algorithm, sce
     a, b = load_model(tmp_path / "a.npz"), load_model(tmp_path / "b.npz")
     np.testing.assert_array_equal(a.threshold, b.threshold)
     np.testing.assert_array_equal(a.value, b.value)
+
+
+def test_external_fine_tuning_gets_the_share_of_roads_left_out_to_check(scene_dir, tmp_path):
+    """Train road model's network fine-tuning through an external gisroads with PyTorch
+    (the project's .venv): the check share reaches the command and a network is written."""
+    from qgis.core import QgsProcessingContext, QgsProcessingFeedback
+
+    from processing_provider.external import ExternalTrainRoadModel
+
+    trainer = REPO / ".venv" / "bin" / "gisroads"
+    has_torch = trainer.exists() and subprocess.run(
+        [str(trainer.parent / "python"), "-c", "import torch"], capture_output=True
+    ).returncode == 0
+    if not has_torch:
+        if os.environ.get("GISROADS_REQUIRE_QGIS"):
+            pytest.fail("no .venv with PyTorch: run make setup")
+        pytest.skip("no gisroads with PyTorch")
+
+    class Feedback(QgsProcessingFeedback):
+        commands = []
+
+        def pushCommandInfo(self, info):  # noqa: N802
+            self.commands.append(info)
+
+    algorithm = ExternalTrainRoadModel(str(trainer))
+    algorithm.initAlgorithm()
+    assert algorithm.parameterDefinition("CHECK").defaultValue() == 0.2
+    params = {"IMAGE": str(scene_dir / "image.tif"),
+              "ROADS": f"{scene_dir / 'truth.gpkg'}|layername=road_centrelines",
+              "STEPS": 2, "CHECK": 0.3, "OUTPUT": str(tmp_path / "tuned.onnx")}
+    context, feedback = QgsProcessingContext(), Feedback()
+    assert algorithm.prepare(params, context, feedback)
+    result = algorithm.runPrepared(params, context, feedback)
+    (command,) = feedback.commands
+    assert " --steps 2 --check 0.3 " in command
+    assert result["OUTPUT"] == str(tmp_path / "tuned.onnx") and (tmp_path / "tuned.onnx").exists()
+    assert 0 < result["ROAD_SHARE"] < 0.5
