@@ -18,6 +18,7 @@ import pytest
 MODULES = [
     "gisroads.evaluate.buffer",
     "gisroads.evaluate.report",
+    "gisroads.features.kerbs",
     "gisroads.imagery.pipeline",
     "gisroads.io.raster",
     "gisroads.network.areas",

@@ -143,6 +143,7 @@ import shapely
 from scipy import ndimage
 
 from ..errors import GisroadsError
+from ..features.kerbs import KERB_GRADIENT, kerb_steps
 from ..geo import GeoRaster
 from ..io.las import (BRIDGE_DECK_CLASS, GROUND_CLASS, NOISE_CLASSES, NOT_ROAD_CLASSES,
                       ROAD_SURFACE_CLASS, PointCloud)
@@ -153,10 +154,6 @@ from .intensity import auto_cell_m, image_grid, split_share
 FILL_SIGMA_M = 16.0
 """Widest Gaussian (sigma, metres) that fills the terrain under buildings; beyond it the
 nearest ground."""
-#: Rise over run of the ground surface (smoothed at sigma 0.5 m, minus its 3 m trend) from
-#: which a cell is on a kerb: on 0.5 m cells a clean step of h metres peaks at about 0.51 h
-#: (central differences over 1 m of the smoothed step), so 0.06 is a 12 cm step.
-KERB_GRADIENT = 0.06
 #: Likelihood of a paved cell for the ``kerbs`` cue: the network stage's low threshold
 #: (``gisroads.lidar.pipeline.EVIDENCE_NETWORK_OPTIONS``).
 PAVED_LIKELIHOOD = 0.6
@@ -370,44 +367,6 @@ def _disk(radius_cells: float) -> np.ndarray:
     r = int(np.ceil(radius_cells))
     yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
     return xx ** 2 + yy ** 2 <= radius_cells ** 2
-
-
-def kerb_steps(ground_low: np.ndarray, cell_m: float, *, sigma_m: float = 0.5,
-               trend_m: float = 3.0) -> np.ndarray:
-    """Height steps of the ground surface: the gradient of its detail.
-
-    The lowest ground return per cell, smoothed at ``sigma_m`` minus its trend at
-    ``trend_m`` (normalised convolution, so scan gaps and buildings do not pull it), and the
-    magnitude of its gradient: a steady slope gives about 0, a camber little, a kerb of h
-    metres a ridge along it (about 0.51 h on 0.5 m cells; :data:`KERB_GRADIENT`).
-
-    Parameters
-    ----------
-    ground_low : ndarray, shape (rows, cols)
-        Lowest ground return per cell, metres; NaN without one.
-    cell_m : float
-        Cell side, metres.
-    sigma_m, trend_m : float
-        Detail and trend scales (Gaussian sigma), metres.
-
-    Returns
-    -------
-    ndarray
-        Rise over run per cell; NaN where the ground returns within ``sigma_m`` carry less
-        than 0.3 of the smoothing's weight.
-    """
-    known = np.isfinite(ground_low)
-    heights = np.where(known, ground_low, 0.0)
-    weight = _smooth(known.astype(float), max(sigma_m, cell_m) / cell_m)
-
-    def surface(sigma):
-        return _ratio(_smooth(heights, sigma / cell_m), _smooth(known.astype(float),
-                                                                sigma / cell_m))
-
-    gy, gx = np.gradient(surface(max(sigma_m, cell_m)) - surface(trend_m), cell_m)
-    steps = np.hypot(gx, gy)
-    steps[~(weight > 0.3)] = np.nan
-    return steps
 
 
 def carriageway_troughs(ground_low: np.ndarray, no_returns: np.ndarray, cell_m: float, *,

@@ -30,6 +30,16 @@ by that of an ideal ``dh_avg`` kerb seen by the point's own neighbourhood radius
 to 1, so ``c`` is again a probability-like value in [0, 1] whatever the density; where the
 face is sampled the clip leaves the paper's value of 1.
 
+Kerbs from the ground surface are this module's addition too (``kerbs=True``): at airborne
+densities the normal term of a kerb is a faint tilt, but the lowest point of each cell
+traces the ground, and its detail steps up across a kerb
+(:func:`gisroads.features.kerbs.kerb_steps`, the kerb the LiDAR road evidence reads). The
+curb term is at least that step's kerb membership. With a map 3 m off, the road-area quality
+went from 0.894 to 0.960 on a synthetic scene (300 m, 10 points/m2), and from 0.684 to 0.745
+on fusa (a test, not a choice). The membership's ramp (from half the kerb gradient to all of
+it) was chosen on the synthetic scene, with the term taken as a floor of the whole map:
+0.966 against 0.954 from three quarters, 0.856 from none and 0.837 for a ramp to twice it.
+
 Drop-offs are this module's addition. A bridge deck has no kerb: its edge is where the
 surface leaves the subcloud's 0.5 m window (the ground is metres below), and an airborne
 cloud has no points on the parapet's face either. So the edge of the area the patch's
@@ -50,6 +60,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from ..errors import GisroadsError
+from ..features.kerbs import kerb_membership, kerb_steps
 from ..geo import GeoRaster
 
 #: Standard lane width (RTAC 1986), metres: the unit of the extent term (Sec. 2.2-2.3).
@@ -236,25 +247,42 @@ def patch_grid(line_xy: np.ndarray, *, cell_m: float, reach_m: float) -> tuple[A
     return Affine(cell_m, 0.0, xmin, 0.0, -cell_m, ymax), shape
 
 
-def cell_means(x, y, values, transform: Affine, shape, *, with_counts: bool = False):
-    """Mean of ``values`` per cell of a north-up grid, 0 in empty cells (and the number of
-    points per cell with ``with_counts``)."""
+def _cells(x, y, transform: Affine, shape) -> tuple[np.ndarray, np.ndarray]:
+    """Flat cell index of the points inside a north-up grid, and which points those are."""
     rows, cols = shape
     col = np.floor((np.asarray(x) - transform.c) / transform.a).astype(np.int64)
     row = np.floor((np.asarray(y) - transform.f) / transform.e).astype(np.int64)
     inside = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
-    flat = row[inside] * cols + col[inside]
+    return row[inside] * cols + col[inside], inside
+
+
+def cell_means(x, y, values, transform: Affine, shape, *, with_counts: bool = False):
+    """Mean of ``values`` per cell of a north-up grid, 0 in empty cells (and the number of
+    points per cell with ``with_counts``)."""
+    rows, cols = shape
+    flat, inside = _cells(x, y, transform, shape)
     total = np.bincount(flat, weights=np.asarray(values, float)[inside], minlength=rows * cols)
     count = np.bincount(flat, minlength=rows * cols)
     means = (total / np.maximum(count, 1)).reshape(shape)
     return (means, count.reshape(shape)) if with_counts else means
 
 
+def kerb_term(x, y, z, transform: Affine, shape) -> np.ndarray:
+    """Kerb membership per cell of a north-up grid (:func:`gisroads.features.kerbs.kerb_membership`
+    of the steps of the lowest point per cell), 0 where unknown."""
+    flat, inside = _cells(x, y, transform, shape)
+    lowest = np.full(shape[0] * shape[1], np.inf)
+    np.minimum.at(lowest, flat, np.asarray(z, float)[inside])
+    lowest[np.isinf(lowest)] = np.nan
+    return kerb_membership(kerb_steps(lowest.reshape(shape), abs(transform.a)))
+
+
 def attractor_map(points_xyz: np.ndarray, line_xy: np.ndarray, plane_normal=(0.0, 0.0, 1.0),
                   *, cell_m: float = 0.5, alpha: float = ALPHA_ATTR, beta: float = BETA_ATTR,
                   detector: str = "exp", k_neighbours: int = MIN_NEIGHBOURS,
                   lane_m: float = LANE_M, min_lanes: float = 1.0, max_lanes: float = 6.0,
-                  drop_off_weight: float = DROP_OFF_WEIGHT, curb=None, crs=None) -> GeoRaster:
+                  drop_off_weight: float = DROP_OFF_WEIGHT, kerbs: bool = True, curb=None,
+                  crs=None) -> GeoRaster:
     """Attractor map ``a = alpha e + beta c`` of one road patch on a grid (Sec. 2.3).
 
     Parameters
@@ -279,6 +307,9 @@ def attractor_map(points_xyz: np.ndarray, line_xy: np.ndarray, plane_normal=(0.0
     drop_off_weight : float
         Curb value given to the edge of the area the points cover (:func:`drop_off_edges`;
         see the module docstring); 0 gives the paper's map.
+    kerbs : bool
+        The curb term is at least the kerb membership of the ground surface's steps
+        (:func:`kerb_term`; see the module docstring); False gives the paper's map.
     curb : ndarray, shape (n,), optional
         ``c(p)`` already computed (:func:`curb_response`); computed here otherwise.
     crs : optional
@@ -300,6 +331,8 @@ def attractor_map(points_xyz: np.ndarray, line_xy: np.ndarray, plane_normal=(0.0
         curb = (curb_response(xyz, plane_normal, k_neighbours=k_neighbours, detector=detector)
                 if len(xyz) >= k_neighbours else np.zeros(len(xyz)))
     c, counts = cell_means(xyz[:, 0], xyz[:, 1], curb, transform, shape, with_counts=True)
+    if kerbs and len(xyz):
+        c = np.maximum(c, kerb_term(xyz[:, 0], xyz[:, 1], xyz[:, 2], transform, shape))
     rows, cols = shape
     cx = transform.c + (np.arange(cols) + 0.5) * transform.a
     cy = transform.f + (np.arange(rows) + 0.5) * transform.e

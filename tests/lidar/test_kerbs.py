@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from gisroads.evaluate import buffer_metrics
-from gisroads.lidar.evidence import (KERB_GRADIENT, carriageway_troughs, kerb_steps,
-                                     median_cells)
+from gisroads.features.kerbs import KERB_GRADIENT, kerb_steps
+from gisroads.lidar.evidence import carriageway_troughs, median_cells
 from gisroads.lidar.pipeline import extract_roads
 from gisroads.synthetic import make_canal_scene, write_cloud
 

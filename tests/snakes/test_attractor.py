@@ -126,3 +126,27 @@ def test_attractor_map_marks_a_kerbless_deck_edge_but_not_the_subclouds_reach():
     assert profile[np.abs(y) < 3].max() < 0.3
     plain = attractor_map(xyz, line, cell_m=0.5, drop_off_weight=0.0)
     assert plain.data.max() <= 0.2 + 1e-6 + 0.05
+
+
+def test_sparse_kerb_is_found_by_the_ground_step_where_the_normals_barely_see_it():
+    """At an airborne density (about 4 points/m2, 2 cm noise) a 15 cm kerb tilts the point
+    normals little; the lowest point per cell steps up across it, and the curb term takes
+    that step (kerbs=True), at the kerb and not on the flat road or sidewalk beside it."""
+    xyz = kerb_cloud(noise_m=0.02, spacing_m=0.5, seed=3)
+    xyz[:, 1] += 5.0                                   # kerb at y = 5, map line at y = 0
+    line = np.array([[-10.0, 0.0], [10.0, 0.0]])
+
+    def profile(kerbs):
+        a = attractor_map(xyz, line, cell_m=0.5, drop_off_weight=0.0, kerbs=kerbs,
+                          k_neighbours=20)
+        y = a.transform.f + (np.arange(a.shape[0]) + 0.5) * a.transform.e
+        x = a.transform.c + (np.arange(a.shape[1]) + 0.5) * a.transform.a
+        return y, a.data[:, (x > -8) & (x < 8)].mean(axis=1)
+
+    y, with_kerbs = profile(True)
+    _, paper = profile(False)
+    at_kerb = np.abs(y - 5.0) <= 0.5
+    assert with_kerbs[at_kerb].max() > 0.2 + 0.8
+    assert with_kerbs[at_kerb].max() > paper[at_kerb].max() + 0.2
+    away = (np.abs(y - 5.0) > 2.5) & (np.abs(y) < 9)  # flat road and sidewalk, inside the data
+    assert with_kerbs[away].max() < 0.2 + 0.15

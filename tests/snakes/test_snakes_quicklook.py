@@ -16,12 +16,14 @@ def test_snakes_draws_its_ribbons_over_the_attractor(lidar_dir, tmp_path):
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["quicklook"] == str(png)
     pixels = imread(png)[..., :3]
-    # orange ribbons and red centre lines over the grey attractor
+    # orange ribbons and red centre lines over the grey-scale attractor (grey where only
+    # the extent term holds, black, white on the kerbs; the page around it is white)
     orange = (pixels[..., 0] > 0.6) & (pixels[..., 1] > 0.3) & (pixels[..., 1] < 0.8) \
         & (pixels[..., 2] < 0.4)
-    grey = (abs(pixels[..., 0] - pixels[..., 1]) < 0.02) & (pixels[..., 0] > 0.2) \
-        & (pixels[..., 0] < 0.9)
-    assert orange.mean() > 0.02 and grey.mean() > 0.1    # measured 0.036, 0.255
+    grey = (abs(pixels[..., 0] - pixels[..., 1]) < 0.02) \
+        & (abs(pixels[..., 1] - pixels[..., 2]) < 0.02) & (pixels[..., 0] > 0.1) \
+        & (pixels[..., 0] < 0.99)
+    assert orange.mean() > 0.015 and grey.mean() > 0.1    # measured 0.024, 0.264
     bad = subprocess.run([sys.executable, "-m", "gisroads.cli", "snakes",
                           str(lidar_dir / "fusa.laz"), str(truth), "-o",
                           str(tmp_path / "t.gpkg"), "--quicklook", str(tmp_path / "x.jpg")],
