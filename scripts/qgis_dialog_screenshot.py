@@ -4,20 +4,24 @@ Run by ``scripts/qgis_dialog_screenshot.sh`` inside ``qgis --code`` under Xvfb (
 the usual way: the system Python, the plugin from its zip in a throwaway profile), so what a
 user sees can be looked at on a machine without a display. Settings come from the
 environment: ``SHOT_ALGORITHM`` (e.g. ``gisroads:lidarroadnetwork``), ``SHOT_PARAMETERS`` (a
-JSON object) and ``SHOT_DIR`` (where ``toolbox.png`` (the Processing toolbox filtered to
-gisroads, every group open), ``dialog.png``, ``window_before_run.png`` (the main
-window with its message bar), ``dialog_after_run.png``,
+JSON object), ``SHOT_SCRIPTS`` (this folder) and ``SHOT_DIR``, where ``toolbox.png`` (the
+Processing toolbox filtered to gisroads, every group open), ``dialog.png``,
+``window_before_run.png`` (the main window with its message bar), ``dialog_after_run.png``,
 ``window_after_run.png`` (the main window: the layers the run loaded, on the map and in the
-layer tree) and ``shot.log`` go).
+layer tree) and ``shot.log`` go.
 """
 import json
 import os
+import sys
 from pathlib import Path
 
 import processing
 from qgis.core import QgsApplication, QgsProject
-from qgis.PyQt.QtCore import QModelIndex, Qt, QTimer
-from qgis.utils import iface, plugins
+from qgis.PyQt.QtCore import QTimer
+from qgis.utils import iface
+
+sys.path.insert(0, os.environ["SHOT_SCRIPTS"])  # qgis --code runs this without __file__
+from qgis_toolbox import show_gisroads_toolbox, toolbox_rows  # noqa: E402
 
 OUT = Path(os.environ["SHOT_DIR"])
 ALGORITHM = os.environ["SHOT_ALGORITHM"]
@@ -29,23 +33,11 @@ def _log(text: str) -> None:
         log.write(text + "\n")
 
 
-def _toolbox_rows(tree, index=QModelIndex(), depth: int = 0) -> list:
-    model, rows = tree.model(), []
-    for row in range(model.rowCount(index)):
-        child = model.index(row, 0, index)
-        rows.append("  " * depth + model.data(child, Qt.DisplayRole))
-        rows += _toolbox_rows(tree, child, depth + 1)
-    return rows
-
-
 def _show_toolbox() -> None:
-    toolbox = plugins["processing"].toolbox
-    toolbox.show()
-    toolbox.searchBox.setText("gisroads")
-    toolbox.algorithmTree.expandAll()
+    toolbox = show_gisroads_toolbox()
 
     def grab() -> None:
-        _log("toolbox: " + json.dumps(_toolbox_rows(toolbox.algorithmTree)))
+        _log("toolbox: " + json.dumps(toolbox_rows(toolbox.algorithmTree)))
         toolbox.grab().save(str(OUT / "toolbox.png"))
         toolbox.hide()
         _open_dialog()

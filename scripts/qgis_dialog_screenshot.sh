@@ -18,7 +18,7 @@ python3 -m zipfile -e "$repo/dist/gisroads_qgis.zip" "$profile/python/plugins"
 printf '[PythonPlugins]\ngisroads_qgis=true\nprocessing=true\n[qgis]\nshowTips=false\ncheckVersion=false\n' \
     > "$profile/QGIS/QGIS3.ini"
 status=0
-env -u QGIS_CUSTOM_CONFIG_PATH -u QGIS_OPTIONS_PATH HOME="$home" XDG_RUNTIME_DIR="$home/runtime" SHOT_DIR="$out" SHOT_ALGORITHM="$2" \
+env -u QGIS_CUSTOM_CONFIG_PATH -u QGIS_OPTIONS_PATH HOME="$home" XDG_RUNTIME_DIR="$home/runtime" SHOT_DIR="$out" SHOT_SCRIPTS="$repo/scripts" SHOT_ALGORITHM="$2" \
     SHOT_PARAMETERS="${3:-{\}}" PYTHONPATH='' \
     timeout 600 xvfb-run -a -s "-screen 0 1600x1000x24" \
     qgis --nologo --noversioncheck --code "$repo/scripts/qgis_dialog_screenshot.py" || status=$?

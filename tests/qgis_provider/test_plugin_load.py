@@ -168,21 +168,17 @@ def Qt_children():  # noqa: N802
 
 DESKTOP_PROBE = r"""
 import json
+import sys
 from pathlib import Path
 from qgis.core import QgsApplication
-from qgis.PyQt.QtCore import QModelIndex, QTimer, Qt
+from qgis.PyQt.QtCore import QTimer
 from qgis.PyQt.QtWidgets import QApplication, QPushButton
-from qgis.utils import iface, plugins
+from qgis.utils import iface
+
+sys.path.insert(0, SCRIPTS)
+from qgis_toolbox import show_gisroads_toolbox, toolbox_rows
 
 seen = {}
-
-def toolbox_rows(tree, index=QModelIndex(), depth=0):
-    model, rows = tree.model(), []
-    for row in range(model.rowCount(index)):
-        child = model.index(row, 0, index)
-        rows.append("  " * depth + model.data(child, Qt.DisplayRole))
-        rows += toolbox_rows(tree, child, depth + 1)
-    return rows
 
 def first_use_dialog():
     dialogs = [w for w in QApplication.topLevelWidgets()
@@ -199,14 +195,10 @@ def report():
     seen["bar"] = [[item.title(), item.text(), [b.text() for b in item.findChildren(QPushButton)]]
                    for item in items]
     seen["providers"] = [p.id() for p in QgsApplication.processingRegistry().providers()]
-    toolbox = plugins["processing"].toolbox
-    toolbox.show()
-    toolbox.searchBox.setText("gisroads")
-    toolbox.algorithmTree.expandAll()
-    QTimer.singleShot(1500, lambda: after_toolbox(items))
+    toolbox = show_gisroads_toolbox()
+    QTimer.singleShot(1500, lambda: after_toolbox(items, toolbox))
 
-def after_toolbox(items):
-    toolbox = plugins["processing"].toolbox
+def after_toolbox(items, toolbox):
     seen["toolbox"] = toolbox_rows(toolbox.algorithmTree)
     iface.mainWindow().grab().save(str(Path(OUT).parent / "window.png"))
     buttons = [b for item in items if item.title() == "gisroads"
@@ -235,7 +227,8 @@ def test_the_desktop_starts_with_one_message_and_no_error_dialog(plain_qgis_proc
         pytest.skip("xvfb-run missing")
     out = tmp_path / "seen.json"
     probe = tmp_path / "probe.py"
-    probe.write_text(f"OUT = {str(out)!r}\n" + DESKTOP_PROBE)
+    probe.write_text(f"OUT = {str(out)!r}\nSCRIPTS = {str(REPO / 'scripts')!r}\n"
+                     + DESKTOP_PROBE)
     started = subprocess.run(
         ["xvfb-run", "-a", "-s", "-screen 0 1280x800x24", "qgis", "--nologo",
          "--noversioncheck", "--code", str(probe)],
