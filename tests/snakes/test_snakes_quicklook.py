@@ -23,7 +23,7 @@ def test_snakes_draws_its_ribbons_over_the_attractor(lidar_dir, tmp_path):
     grey = (abs(pixels[..., 0] - pixels[..., 1]) < 0.02) \
         & (abs(pixels[..., 1] - pixels[..., 2]) < 0.02) & (pixels[..., 0] > 0.1) \
         & (pixels[..., 0] < 0.99)
-    assert orange.mean() > 0.015 and grey.mean() > 0.1    # measured 0.024, 0.264
+    assert orange.mean() > 0.02 and grey.mean() > 0.1    # measured 0.024, 0.264
     bad = subprocess.run([sys.executable, "-m", "gisroads.cli", "snakes",
                           str(lidar_dir / "fusa.laz"), str(truth), "-o",
                           str(tmp_path / "t.gpkg"), "--quicklook", str(tmp_path / "x.jpg")],
