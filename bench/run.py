@@ -1079,8 +1079,8 @@ def _layer_look(path, record, deleted, lines, title):
 
 LAYER_PATHS = {"network": "the convolutional network fine-tuned on the layer (gisroads "
                           "train -o model.onnx; gisroads image --model model.onnx)",
-               "layer": "boosted trees trained on the layer, adapted (gisroads train -o "
-                        "model.npz)",
+               "layer": "boosted trees trained on the layer, adapted, averaged with the "
+                        "bundled network (gisroads train -o model.npz)",
                "default": "the bundled network, no layer"}
 """Extractions of :func:`case_imagery_layer_training`."""
 _LAYER_SCORES = ("completeness_deleted", "correctness_new", "completeness", "correctness",

@@ -74,19 +74,17 @@ DEFAULT_METHOD = PROBABILITY_METHOD
 """The path :func:`extract_image_roads` takes when given a model and no ``method``: the
 probability alone through the network stage (on real images it scores above the papers'
 stages fed the same probability; docs/imagery.md gives the figures)."""
-LAYER_LOW_THRESHOLD = 0.7
-"""With a model trained on the image's own road layer
-(:func:`gisroads.learn.training.train_from_layer`), the probability path's road mask grows
-from the pixels at ``probability_threshold`` into those connected to them at this share of
-it (hysteresis, ``low_threshold`` of :func:`gisroads.network.rasters.skeleton_parts`): such
-a model knows the image, and a road it misses in dappled shade still holds a faint line of
-probability joined to the road it finds. Issue 15's update case (``make bench``
-``imagery_layer_training``: each scored Massachusetts tile, 30 % of the reference roads
-deleted, eight seeds): completeness of the deleted roads 0.780 against 0.762 without it
-(per tile 0.862 / 0.738 / 0.768 / 0.751 against 0.856 / 0.685 / 0.759 / 0.749; one run
-0.607 -> 0.828), correctness on all roads 0.352 against 0.372; 0.5 of the threshold gave
-0.783 and 0.337. The default path does not use it: there the faint probability is the
-domain shift's noise (mean quality 0.260-0.293 against 0.353 in session-9 scratch runs)."""
+LAYER_NETWORK_SHARE = 0.5
+"""A model trained on the image's own road layer (:func:`gisroads.learn.training.train_from_layer`)
+is not used alone: its probability is averaged with the bundled convolutional network's, this
+share the network's, and thresholded at the network's threshold. The trees have learnt this
+image's roads, the network what a road looks like anywhere; alone the trees also mark the
+lots and roofs of road colour. Chosen on the 25 held-out Massachusetts crops with at least
+1.2 km of road (``validation.txt``; 30 % of each crop's roads deleted from the layer, two
+seeds; centre lines against the masks' skeletons, 3 m): deleted roads found / correctness /
+quality 0.592 / 0.596 / 0.461 with the trees alone (hysteresis to 0.7 of their 0.4), 0.590 /
+0.813 / 0.555 with the network alone, 0.641 / 0.796 / 0.627 averaged; averaged with that
+hysteresis 0.662 / 0.691 / 0.555, at 0.35 0.673 / 0.693 / 0.565."""
 
 IMAGE_THRESHOLD_PERCENTILE = 98.0
 IMAGE_THRESHOLD_SHARE = 0.6
@@ -149,11 +147,21 @@ def resolve_model(model):
 
 def default_threshold(model) -> float:
     """The probability path's road threshold for ``model``: the convolutional network's
-    own (chosen on held-out tiles, in its metadata), :data:`PROBABILITY_THRESHOLD` for the
-    boosted trees."""
-    from ..learn.convnet import ConvNet
+    own (chosen on held-out tiles, in its metadata), also for boosted trees trained on a
+    road layer (:data:`LAYER_NETWORK_SHARE`), else :data:`PROBABILITY_THRESHOLD`."""
+    from ..learn.convnet import ConvNet, load_convnet
 
-    return model.threshold if isinstance(model, ConvNet) else PROBABILITY_THRESHOLD
+    if isinstance(model, ConvNet):
+        return model.threshold
+    return load_convnet().threshold if _layer_trees(model) else PROBABILITY_THRESHOLD
+
+
+def _layer_trees(model) -> bool:
+    """Whether ``model`` is boosted trees trained on an image's own road layer."""
+    from ..learn.model import RoadModel
+    from ..learn.training import trained_on_road_layer
+
+    return isinstance(model, RoadModel) and trained_on_road_layer(model)
 
 
 def image_threshold(probability: GeoRaster, threshold: float) -> float:
@@ -199,14 +207,13 @@ def resolve_context(context, model):
     labelled tiles); None for ``None`` or ``"none"``; else a path or a model."""
     from ..learn.context import load_context_model
     from ..learn.model import RoadModel
-    from ..learn.training import trained_on_road_layer
 
     if context is None or isinstance(context, RoadModel):
         return context
     if str(context).lower() == "none":
         return None
     if str(context).lower() == "default":
-        if not isinstance(model, RoadModel) or trained_on_road_layer(model):
+        if not isinstance(model, RoadModel) or _layer_trees(model):
             return None
         return load_context_model()
     if not Path(context).is_file():
@@ -229,20 +236,35 @@ def road_probability(image: GeoRaster, model="default", *, adapt: bool = True,
     model's confident errors on other sensors are not grey. ``context`` then re-scores the
     probability from its own shape (:func:`gisroads.learn.context.context_probability`;
     :func:`resolve_context`: by default the bundled context model, except for a model
-    trained on a road layer)."""
-    from importlib.util import find_spec
-
-    from ..learn.context import context_probability
+    trained on a road layer). Boosted trees trained on a road layer are averaged with the
+    bundled network (:data:`LAYER_NETWORK_SHARE`)."""
     from ..learn.convnet import ConvNet, convnet_probability
-    from ..learn.model import predict_probability
-    from .baseline import road_colour_mask
 
     model = resolve_model(model)
     if model is None:
         raise GisroadsError("no model")
     if isinstance(model, ConvNet):
         return convnet_probability(image, model, progress=progress)
-    context = resolve_context(context, model)
+    if not _layer_trees(model):
+        return _trees_probability(image, model, adapt=adapt,
+                                  context=resolve_context(context, model), progress=progress)
+    network = convnet_probability(image, progress=scaled(progress, 0.0, 0.5))
+    trees = _trees_probability(image, model, adapt=adapt, context=None,
+                               progress=scaled(progress, 0.5, 1.0))
+    return dataclasses.replace(trees, data=(LAYER_NETWORK_SHARE * network.data + (
+        1 - LAYER_NETWORK_SHARE) * trees.data).astype(np.float32))
+
+
+def _trees_probability(image: GeoRaster, model, *, adapt: bool, context,
+                       progress: Progress) -> GeoRaster:
+    """The boosted trees' probability of :func:`road_probability`, adapted to the image
+    and re-scored by the ``context`` model (a model or None)."""
+    from importlib.util import find_spec
+
+    from ..learn.context import context_probability
+    from ..learn.model import predict_probability
+    from .baseline import road_colour_mask
+
     first = progress if context is None else scaled(progress, 0.0, 0.85)
     if adapt and find_spec("sklearn") is not None:
         from ..learn.training import adapted_probability
@@ -327,9 +349,7 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
     probability_threshold : float, optional
         See ``method``; by default the model's own (:func:`default_threshold`), for the
         convolutional network lowered on an image it is unsure of (:func:`image_threshold`;
-        not for one fine-tuned on the image's road layer). With a model
-        trained on a road layer the mask grows, by
-        hysteresis, into the pixels connected to it at :data:`LAYER_LOW_THRESHOLD` of it.
+        not for one fine-tuned on the image's road layer).
     tile_px : int
         The papers' stages run tile by tile on an image with more than ``2 * tile_px`` rows
         or columns (tiles of ``tile_px`` overlapping by :data:`TILE_OVERLAP_M`, road strings
@@ -399,7 +419,9 @@ def _model_name(model) -> str | None:
 
     if model is None:
         return None
-    return model.path.name if isinstance(model, ConvNet) else "boosted"
+    if isinstance(model, ConvNet):
+        return model.path.name
+    return "boosted, road layer + network" if _layer_trees(model) else "boosted"
 
 
 class _StageClock:
@@ -450,16 +472,11 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
     if method == PROBABILITY_METHOD:
         if probability is None:
             raise GisroadsError(f"method {PROBABILITY_METHOD!r} needs a model")
-        from ..learn.model import RoadModel
-        from ..learn.training import trained_on_road_layer
         from ..network.rasters import raster_to_network
         if per_image:
             probability_threshold = image_threshold(probability, probability_threshold)
-        low = (LAYER_LOW_THRESHOLD * probability_threshold
-               if isinstance(model, RoadModel) and trained_on_road_layer(model) else None)
         network = raster_to_network(probability, threshold=probability_threshold,
-                                    method=PROBABILITY_METHOD,
-                                    part_options={"low_threshold": low}, wide_areas=True,
+                                    method=PROBABILITY_METHOD, wide_areas=True,
                                     progress=scaled(progress, 0.15, 1.0))
         lap("network")
         network.centrelines["cues"] = "model"
@@ -467,7 +484,7 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
         return ImageRoads(network, {
             "timings_s": timings, "method": method, "probability": probability,
             "cues": {"cues": "model", "model": True}, "context_model": context is not None,
-            "low_threshold": low, "threshold": probability_threshold,
+            "threshold": probability_threshold,
             "model": _model_name(model),
             "gap_edges": len(network.qa["gap_edges"]),
             "roads": len(network.centrelines)})

@@ -77,7 +77,6 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     result = {**network_summary(out_path, network), "cues": roads.report["cues"]["cues"],
               "method": roads.report["method"], "timings_s": roads.report["timings_s"],
               "context_model": roads.report.get("context_model", False),
-              "low_threshold": roads.report.get("low_threshold"),
               "model": roads.report.get("model"),
               "threshold": roads.report.get("threshold")}
     if probability_path is not None:

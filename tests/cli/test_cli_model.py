@@ -13,6 +13,7 @@ from gisroads.geo import GeoRaster
 from gisroads.io.raster import read_raster, write_geotiff
 from gisroads.io.vector import list_layers, read_layer
 from gisroads.learn import load_model
+from gisroads.learn.convnet import load_convnet
 from gisroads.learn.scores import pixel_auc
 from tests.road_layers import assert_empty_road_layers
 
@@ -59,10 +60,11 @@ def test_image_with_the_trained_model_finds_the_roads_and_writes_the_probability
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert "model" in summary["cues"] and summary["roads"] > 0
-    # a model trained on the layer keeps its own probability (no context model), and its
-    # road mask grows by hysteresis (LAYER_LOW_THRESHOLD of the 0.4 threshold)
+    # a model trained on the layer is not re-scored by the context model: it is averaged
+    # with the bundled network and cut at the network's threshold (LAYER_NETWORK_SHARE)
     assert summary["context_model"] is False
-    assert summary["low_threshold"] == pytest.approx(0.28)
+    assert summary["model"] == "boosted, road layer + network"
+    assert summary["threshold"] == pytest.approx(load_convnet().threshold)
     assert summary["probability"] == str(tmp_path / "p.tif")
     probability = read_raster(tmp_path / "p.tif")
     assert probability.data.dtype == np.float32 and probability.data.shape[0] == 1
@@ -123,7 +125,6 @@ def test_context_model_on_by_default_and_off_with_none(scene, tmp_path):
         rasters[context] = read_raster(tmp_path / f"{context}.tif").data[0]
     assert summaries["default"]["context_model"] is True
     assert summaries["none"]["context_model"] is False
-    assert summaries["default"]["low_threshold"] is None
     assert np.nanmax(np.abs(rasters["default"] - rasters["none"])) > 0.1
     assert all(np.nanmin(r) >= 0 and np.nanmax(r) <= 1 for r in rasters.values())
 

@@ -110,34 +110,40 @@ def test_models_by_name_file_and_errors(scene_rgb, tmp_path):
         extract_image_roads(rgb, probability=small)
 
 
-def test_a_layer_trained_model_follows_its_faint_roads(scene_rgb):
-    """With a model trained on the image's road layer the probability path's mask grows
-    into the faint pixels joined to a confident road (hysteresis at
-    ``LAYER_LOW_THRESHOLD`` of the threshold); with the bundled boosted trees it stops where
-    the probability falls under the threshold."""
-    from dataclasses import replace
-
-    from gisroads.learn.training import ROAD_LAYER
+def test_a_layer_trained_model_is_averaged_with_the_network(scene_rgb, monkeypatch):
+    """Boosted trees trained on a road layer are not used alone: their probability is
+    averaged with the bundled network's (LAYER_NETWORK_SHARE) and cut at the network's
+    threshold; the bundled boosted trees keep their own probability and threshold."""
+    from gisroads.imagery import pipeline
+    from gisroads.learn import convnet, training
 
     _, rgb, _ = scene_rgb
     rows, cols = rgb.shape
-    probability = np.full(rgb.shape, 0.02, np.float32)
     band = slice(rows // 2 - 8, rows // 2 + 8)  # an 8 m road across the image
-    probability[band, : cols // 2] = 0.9
-    probability[band, cols // 2:] = 0.32  # above 0.7 * 0.4, under 0.4
-    probability = GeoRaster(probability, rgb.transform, rgb.crs)
+    network = np.full(rgb.shape, 0.05, np.float32)
+    network[band] = 0.9
+    trees = np.full(rgb.shape, 0.3, np.float32)
+    trees[band, : cols // 2] = 0.1  # the trees miss the west half, and see road everywhere
+    monkeypatch.setattr(convnet, "convnet_probability",
+                        lambda image, model=None, **_: GeoRaster(network, image.transform,
+                                                                 image.crs))
+    monkeypatch.setattr(training, "adapted_probability",
+                        lambda image, model, **_: GeoRaster(trees, image.transform, image.crs))
     default = resolve_model("boosted")
-    layer = replace(default, metadata={**default.metadata, "trained_on": ROAD_LAYER})
-    km = {}
-    for name, model in (("default", default), ("layer", layer)):
-        roads = extract_image_roads(rgb, probability=probability, model=model)
-        km[name] = roads.network.centrelines.length.sum() / 1000
-        assert roads.report["low_threshold"] == (None if name == "default"
-                                                  else pytest.approx(0.28))
-    extent_km = cols * rgb.pixel_size / 1000
-    print(km, extent_km)
-    assert km["layer"] > 0.9 * extent_km
-    assert km["default"] < 0.6 * extent_km
+    layer = dataclasses.replace(default, metadata={**default.metadata, "trained_on": ROAD_LAYER})
+    roads = extract_image_roads(rgb, model=layer)
+    expected = pipeline.LAYER_NETWORK_SHARE * network + (1 - pipeline.LAYER_NETWORK_SHARE) * trees
+    np.testing.assert_allclose(roads.report["probability"].data, expected, atol=1e-6)
+    assert roads.report["threshold"] == pytest.approx(load_convnet().threshold)
+    assert roads.report["context_model"] is False
+    assert roads.report["model"] == "boosted, road layer + network"
+    # the road runs across the whole image, and nothing else is drawn
+    lines = roads.network.centrelines
+    assert lines.length.sum() > 0.9 * cols * rgb.pixel_size
+    assert lines.length.sum() < 1.2 * cols * rgb.pixel_size
+    alone = extract_image_roads(rgb, model=default, context=None)
+    assert alone.report["threshold"] == pytest.approx(pipeline.PROBABILITY_THRESHOLD)
+    np.testing.assert_allclose(alone.report["probability"].data, trees)
 
 
 def test_boosted_model_runs_and_reports_its_probability(scene_rgb):
