@@ -20,6 +20,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingOutputNumber,
+                       QgsProcessingParameterBoolean,
                        QgsProcessingParameterEnum, QgsProcessingParameterFeatureSource,
                        QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer,
@@ -236,13 +237,19 @@ class ExternalRoadRasterToNetwork(_ExternalRoadNetwork):
                                           minValue=0.0, maxValue=1.0),
              "pixels whose smoothed probability reaches this are road (0-1; a 0-255 raster "
              "is scaled to 0-1 first)"),
+            (QgsProcessingParameterBoolean("WIDE_AREAS", "Roads through car parks and plazas",
+                                           False),
+             "car parks, plazas and other wide paved areas give the roads that cross them, "
+             "not their outlines and aisles (the imagery algorithm's own rule)"),
         ]
 
     def arguments(self, parameters, context, feedback):
         raster = self.parameterAsRasterLayer(parameters, "INPUT", context)
         return raster.source(), [
             "--band", str(self.parameterAsInt(parameters, "BAND", context)),
-            "--threshold", str(self.parameterAsDouble(parameters, "THRESHOLD", context))]
+            "--threshold", str(self.parameterAsDouble(parameters, "THRESHOLD", context)),
+            *(["--wide-areas"] if self.parameterAsBool(parameters, "WIDE_AREAS", context)
+              else [])]
 
     def title(self, parameters, context):
         return self.parameterAsRasterLayer(parameters, "INPUT", context).name()

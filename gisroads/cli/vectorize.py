@@ -24,6 +24,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--band", type=int,
                    help="1-based band to read (default: the first of a one- or two-band "
                         "raster; a raster of three or more bands needs it)")
+    p.add_argument("--wide-areas", action="store_true",
+                   help="draw the roads through car parks and plazas, not their outlines and "
+                        "aisles (what 'gisroads image' does with its own probability)")
     add_georeferencing_options(p, "a raster")
     p.add_argument("--quicklook", type=Path, help="also draw a PNG of the result")
 
@@ -31,7 +34,8 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     from ..jobs import vectorize_job
     result = vectorize_job(args.input, args.out, band=args.band, threshold=args.threshold,
-                           pixel_m=args.pixel, crs=args.crs, quicklook=args.quicklook,
+                           pixel_m=args.pixel, crs=args.crs, wide_areas=args.wide_areas,
+                           quicklook=args.quicklook,
                            progress=ProgressBar(not args.json))
     print_result(result, args.json)
     return 0

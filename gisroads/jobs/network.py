@@ -19,8 +19,8 @@ from .common import (_layer, _network_quicklook, _warn_if_no_road, _write_networ
 
 def vectorize_job(raster_path, out_path, *, band: int | None = None,
                   threshold: float = THRESHOLD,
-                  pixel_m: float | None = None, crs=None, quicklook=None,
-                  progress: Progress = None) -> dict:
+                  pixel_m: float | None = None, crs=None, wide_areas: bool = False,
+                  quicklook=None, progress: Progress = None) -> dict:
     """Any road raster (mask or probability) to a road network in a GeoPackage.
 
     Writes road_centrelines, road_polygons, junctions and the QA layers gap_edges,
@@ -28,7 +28,9 @@ def vectorize_job(raster_path, out_path, *, band: int | None = None,
     in its UTM zone); optionally a ``quicklook`` PNG. See
     :func:`gisroads.network.rasters.raster_to_network`. ``band``: the 1-based band to read;
     by default the first of a one- or two-band raster, and a raster of three or more bands
-    (an image, most likely) is refused.
+    (an image, most likely) is refused. ``wide_areas``: car parks and plazas give the roads
+    through them, not their outlines and aisles (:mod:`gisroads.network.areas`; what
+    ``gisroads image`` does with its own probability).
     """
     raster, source_crs = read_image(raster_path, pixel_m=pixel_m, crs=crs)
     bands = raster.data.shape[0] if raster.data.ndim == 3 else 1
@@ -38,7 +40,7 @@ def vectorize_job(raster_path, out_path, *, band: int | None = None,
             "probability or mask (one band, 0-1 or 0-255); give --band N to read one band "
             "of it, or run 'gisroads image' on an aerial image")
     network = raster_to_network(raster, band=band or 1, threshold=threshold,
-                                progress=scaled(progress, 0.0, 0.95))
+                                wide_areas=wide_areas, progress=scaled(progress, 0.0, 0.95))
     _write_network(out_path, network, raster.crs, source_crs, raster_path)
     result = {**network_summary(out_path, network),
               "gaps_bridged": int(network.qa["gap_edges"]["selected"].sum())}

@@ -1,6 +1,6 @@
 """Road raster to network: any road mask or probability raster to a clean, connected network."""
-from qgis.core import QgsProcessingOutputNumber, QgsProcessingParameterNumber, \
-    QgsProcessingParameterRasterLayer
+from qgis.core import QgsProcessingOutputNumber, QgsProcessingParameterBoolean, \
+    QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer
 
 from gisroads.geo import CENTRELINES, JUNCTIONS, POLYGONS
 from gisroads.jobs import vectorize_job
@@ -45,6 +45,10 @@ class RoadRasterToNetwork(GisroadsAlgorithm):
                                           minValue=0.0, maxValue=1.0),
              "pixels whose smoothed probability reaches this are road (0-1; a 0-255 raster "
              "is scaled to 0-1 first)"),
+            (QgsProcessingParameterBoolean("WIDE_AREAS", self.tr("Roads through car parks and "
+                                                                 "plazas"), False),
+             "car parks, plazas and other wide paved areas give the roads that cross them, "
+             "not their outlines and aisles (the imagery algorithm's own rule)"),
             (network_output(self.tr, "GeoPackage receiving every layer, in the raster's CRS"),
              None),
         ])
@@ -60,6 +64,7 @@ class RoadRasterToNetwork(GisroadsAlgorithm):
                 raster.source(), out,
                 band=self.parameterAsInt(parameters, "BAND", context),
                 threshold=self.parameterAsDouble(parameters, "THRESHOLD", context),
+                wide_areas=self.parameterAsBool(parameters, "WIDE_AREAS", context),
                 progress=progress_callback(feedback))
         load_geopackage_on_completion(context, out, (
             "rejected", "gap_edges", "junction_connections", POLYGONS, CENTRELINES,

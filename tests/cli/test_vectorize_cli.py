@@ -46,3 +46,22 @@ def test_nan_raster_is_one_error_line_and_nothing_written(tmp_path):
     assert done.returncode == 2
     assert done.stderr.strip().splitlines()[-1].startswith("gisroads: error:")
     assert not out.exists()
+
+
+def test_wide_areas_flag_draws_the_street_not_the_car_park(tmp_path):
+    """``--wide-areas``: a street with a car park off it gives the street alone; without
+    the flag the car park's outline and aisles are drawn as roads."""
+    from gisroads.io.raster import write_geotiff
+    from tests.network.test_areas import _street_with_car_park
+
+    raster = write_geotiff(tmp_path / "p.tif", _street_with_car_park(access=True))
+    summaries = {}
+    for name, flags in (("plain", []), ("areas", ["--wide-areas"])):
+        done = gisroads("vectorize", raster, "-o", tmp_path / f"{name}.gpkg", *flags, "--json")
+        assert done.returncode == 0, done.stderr
+        summaries[name] = json.loads(done.stdout)
+    assert summaries["plain"]["roads"] >= 5
+    assert summaries["areas"]["roads"] == 1
+    assert 135 < summaries["areas"]["length_m"] < 160  # the 150 m street
+    rejected = read_layer(tmp_path / "areas.gpkg", "rejected")
+    assert (rejected.reason == "wide paved area").sum() >= 4

@@ -51,3 +51,17 @@ def test_raster_without_roads_gives_empty_layers_and_a_warning(qgis_process, tmp
                              f"INPUT={raster}", f"OUTPUT={out}")
     assert "no road found" in completed.stdout + completed.stderr
     assert len(gpd.read_file(out, layer="road_centrelines")) == 0
+
+
+def test_wide_areas_give_the_street_through_a_car_park(qgis_process, tmp_path):
+    """WIDE_AREAS: the street alone, not the car park's outline and aisles (one road
+    against five or more without it)."""
+    from gisroads.io.raster import write_geotiff
+    from tests.network.test_areas import _street_with_car_park
+
+    raster = write_geotiff(tmp_path / "p.tif", _street_with_car_park(access=True))
+    plain = qgis_process.run("roadrastertonetwork", INPUT=raster, OUTPUT=tmp_path / "a.gpkg")
+    areas = qgis_process.run("roadrastertonetwork", INPUT=raster, WIDE_AREAS=True,
+                             OUTPUT=tmp_path / "b.gpkg")
+    assert plain["ROADS"] >= 5
+    assert areas["ROADS"] == 1 and 135 < areas["LENGTH_M"] < 160
