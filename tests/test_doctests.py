@@ -21,6 +21,7 @@ MODULES = [
     "gisroads.features.kerbs",
     "gisroads.imagery.pipeline",
     "gisroads.io.raster",
+    "gisroads.jobs.common",
     "gisroads.network.areas",
     "gisroads.network.branches",
     "gisroads.io.vector",

@@ -3,6 +3,7 @@ a layer), the summary of a written road network, its quick-look, the no-road war
 the header facts of ``gisroads info``."""
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import warnings
 from pathlib import Path
@@ -22,10 +23,25 @@ VECTOR_SUFFIXES = {".gpkg", ".geojson", ".json", ".shp", ".fgb", ".kml", ".gml"}
 
 
 def stage_default(function, parameter: str):
-    """The default of ``parameter`` in the signature of the stage ``function``: the one
-    place a default is written, read by the jobs, the command line and the QGIS
-    algorithms."""
-    return inspect.signature(function).parameters[parameter].default
+    """The default of ``parameter`` of the stage ``function``: the one place a default is
+    written, read by the jobs, the command line and the QGIS algorithms. A parameter of the
+    signature, or a field of its default options object (a dataclass, e.g.
+    :class:`gisroads.lidar.hypotheses.HypothesisOptions`).
+
+    Examples
+    --------
+    >>> from gisroads.jobs.common import stage_default
+    >>> from gisroads.lidar.hypotheses import T_BD, road_hypotheses
+    >>> stage_default(road_hypotheses, "t_bd") == T_BD
+    True
+    """
+    parameters = inspect.signature(function).parameters
+    if parameter in parameters:
+        return parameters[parameter].default
+    for options in (p.default for p in parameters.values()):
+        if dataclasses.is_dataclass(options) and hasattr(options, parameter):
+            return getattr(options, parameter)
+    raise KeyError(f"{function.__name__} has no parameter {parameter!r}")
 
 
 def parse_metres(text: str, name: str = "value") -> tuple[float, ...]:

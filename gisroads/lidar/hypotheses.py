@@ -37,6 +37,8 @@ feature, and on fusa.laz from 0.16/0.37 to 0.52/0.95 (with the cover's d_max at 
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import geopandas as gpd
 import numpy as np
 import shapely
@@ -274,32 +276,13 @@ def _image_array(image: GeoRaster) -> np.ndarray:
     return data
 
 
-def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
-                    widths_m=DEFAULT_WIDTHS_M, lengths_m=DEFAULT_LENGTHS_M,
-                    orientations_rad=None, fan_rad=FAN_RAD, corner_step_m: float = CORNER_STEP_M,
-                    straight_m: float = STRAIGHT_M, t_bd: float = T_BD, t_int: float = T_INT,
-                    theta2_rad: float = THETA2_RAD, band_m: float = BAND_M,
-                    edge_band_m: float = EDGE_BAND_M, edge_ratio: float = EDGE_RATIO,
-                    edge_slack_m: float = EDGE_SLACK_M,
-                    edge_min_step: float = T_BD, edge_end_m: float = EDGE_END_M,
-                    overhang_m: float = OVERHANG_M,
-                    min_elongation: float = MIN_ELONGATION, snap_m: float = SNAP_M,
-                    min_valid_fraction: float = 0.5, beta_bd: float = 1.0,
-                    beta_int: float = 1.0, max_hypotheses: int | None = 200_000,
-                    progress: Progress = None) -> gpd.GeoDataFrame:
-    """Valid rectangular road hypotheses of an intensity image (Sec. 4.3).
+@dataclass(frozen=True)
+class HypothesisOptions:
+    """The options of :func:`road_hypotheses` (Sec. 4.3): the windows tried, the validity
+    thresholds and the check that a window's sides are the road's edges.
 
-    Parameters
+    Attributes
     ----------
-    image : GeoRaster
-        Intensity in [0, 1], road darker than its surroundings, NaN = no data; square
-        pixels of side ``cell_m`` (its ``pixel_size``), map units metres.
-    magnitude, orientation_rad : ndarray, shape (rows, cols)
-        Edge strength and edge-line orientation in [0, pi), counter-clockwise from east
-        (see :mod:`gisroads.features.rectangles`).
-    labels : ndarray of int, shape (rows, cols)
-        Segmentation (NCut over-segmentation), -1 = masked; corners are sampled on the
-        boundaries between valid labels.
     widths_m, lengths_m : sequence of float
         Window widths and lengths, metres (:data:`DEFAULT_WIDTHS_M`,
         :data:`DEFAULT_LENGTHS_M`).
@@ -345,8 +328,54 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
         Weights of ``score = beta_bd * s_bd + beta_int * s_int`` (Eq. 5).
     max_hypotheses : int or None
         Keep only this many, the highest scores (bounds memory on large tiles).
+    """
+
+    widths_m: tuple = DEFAULT_WIDTHS_M
+    lengths_m: tuple = DEFAULT_LENGTHS_M
+    orientations_rad: tuple | None = None
+    fan_rad: tuple = FAN_RAD
+    corner_step_m: float = CORNER_STEP_M
+    straight_m: float = STRAIGHT_M
+    t_bd: float = T_BD
+    t_int: float = T_INT
+    theta2_rad: float = THETA2_RAD
+    band_m: float = BAND_M
+    edge_band_m: float = EDGE_BAND_M
+    edge_ratio: float = EDGE_RATIO
+    edge_slack_m: float = EDGE_SLACK_M
+    edge_min_step: float = T_BD
+    edge_end_m: float = EDGE_END_M
+    overhang_m: float = OVERHANG_M
+    min_elongation: float = MIN_ELONGATION
+    snap_m: float = SNAP_M
+    min_valid_fraction: float = 0.5
+    beta_bd: float = 1.0
+    beta_int: float = 1.0
+    max_hypotheses: int | None = 200_000
+
+
+def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels,
+                    options: HypothesisOptions = HypothesisOptions(), *,
+                    progress: Progress = None, **changes) -> gpd.GeoDataFrame:
+    """Valid rectangular road hypotheses of an intensity image (Sec. 4.3).
+
+    Parameters
+    ----------
+    image : GeoRaster
+        Intensity in [0, 1], road darker than its surroundings, NaN = no data; square
+        pixels of side ``cell_m`` (its ``pixel_size``), map units metres.
+    magnitude, orientation_rad : ndarray, shape (rows, cols)
+        Edge strength and edge-line orientation in [0, pi), counter-clockwise from east
+        (see :mod:`gisroads.features.rectangles`).
+    labels : ndarray of int, shape (rows, cols)
+        Segmentation (NCut over-segmentation), -1 = masked; corners are sampled on the
+        boundaries between valid labels.
+    options : HypothesisOptions
+        Windows, thresholds and edge checks; defaults from the paper.
     progress : callable, optional
         ``progress(fraction, message)`` once per orientation.
+    **changes
+        Fields of ``options`` to change for this call, e.g. ``widths_m=(6.0, 9.0)``.
 
     Returns
     -------
@@ -358,6 +387,9 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
         window's extent right of and along that side); ``s_bd, s_int, score``;
         ``width_index`` into ``widths_m``.
     """
+    options = replace(options, **changes)
+    widths_m, lengths_m = options.widths_m, options.lengths_m
+    orientations_rad = options.orientations_rad
     intensity = _image_array(image)
     labels = np.asarray(labels, dtype=np.int32)
     magnitude = np.asarray(magnitude, dtype=np.float64)
@@ -371,15 +403,15 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
     length_px = np.round(lengths_m / cell_m).astype(np.int64)
     if width_px.min(initial=2) < 2 or length_px.min(initial=1) < 1:
         raise GisroadsError("windows must be at least 2 pixels wide and 1 pixel long")
-    band_px = max(int(round(band_m / cell_m)), 1)
-    edge_band_px = max(int(round(edge_band_m / cell_m)), 1)
-    snap_px = int(round(snap_m / cell_m))
-    edge_slack_px = max(int(round(edge_slack_m / cell_m)), 1)
-    step_px = max(int(round(corner_step_m / cell_m)), 1)
-    straight_px = max(int(round(straight_m / cell_m)), 3)
+    band_px = max(int(round(options.band_m / cell_m)), 1)
+    edge_band_px = max(int(round(options.edge_band_m / cell_m)), 1)
+    snap_px = int(round(options.snap_m / cell_m))
+    edge_slack_px = max(int(round(options.edge_slack_m / cell_m)), 1)
+    step_px = max(int(round(options.corner_step_m / cell_m)), 1)
+    straight_px = max(int(round(options.straight_m / cell_m)), 3)
     if orientations_rad is None:
         orientations_rad = _fanned(boundary_orientations(labels, magnitude, orientation_rad),
-                                   fan_rad)
+                                   options.fan_rad)
     # On a north-up grid the map angle is the pixel angle (edges.py convention).
     orientations_rad = np.mod(np.atleast_1d(np.asarray(orientations_rad, dtype=float)),
                               2 * np.pi)
@@ -389,7 +421,7 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
         report(progress, index / len(orientations_rad),
                f"road hypotheses at {np.degrees(theta):.0f} deg")
         features = rotated_features(intensity, magnitude, orientation_rad, theta,
-                                    theta2_rad=theta2_rad)
+                                    theta2_rad=options.theta2_rad)
         rotated_labels, _ = rotate_to(labels, theta, order=0, cval=-1)
         line_row, col = _straight_boundary_corners(rotated_labels, step_px=step_px,
                                                    straight_px=straight_px)
@@ -397,25 +429,25 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
                                    band_px=edge_band_px) if snap_px
                      else np.stack([line_row, line_row], axis=1))
         r0, c0, w_index, l_index = _windows(line_rows, col, width_px, length_px)
-        elongated = np.flatnonzero(length_px[l_index] >= min_elongation * width_px[w_index])
+        elongated = np.flatnonzero(length_px[l_index] >= options.min_elongation * width_px[w_index])
         r0, c0, w_index, l_index = (a[elongated] for a in (r0, c0, w_index, l_index))
         # S_bd first: it rejects most windows, the rest need S_int and the data check.
         s_bd = boundary_strength(features, r0, c0, width_px[w_index], length_px[l_index],
                                  band_px=band_px)
-        keep = np.flatnonzero(s_bd >= t_bd)
+        keep = np.flatnonzero(s_bd >= options.t_bd)
         r0, c0, w_index, l_index, s_bd = (a[keep] for a in (r0, c0, w_index, l_index, s_bd))
         w, length = width_px[w_index], length_px[l_index]
         s_int = interior_strength(features, r0, c0, w, length)
-        keep = (s_int >= t_int) & (valid_fraction(features, r0, c0, w, length)
-                                   >= min_valid_fraction)
+        keep = (s_int >= options.t_int) & (valid_fraction(features, r0, c0, w, length)
+                                         >= options.min_valid_fraction)
         keep &= _centre_line_inside(features.to_image, intensity.shape, r0, c0, w, length,
-                                    overhang_px=overhang_m / cell_m)
-        if edge_ratio > 0:
+                                    overhang_px=options.overhang_m / cell_m)
+        if options.edge_ratio > 0:
             at = np.flatnonzero(keep)
             keep[at] = sides_on_strongest_edges(
                 features, r0[at], c0[at], w[at], length[at], edge_band_px=edge_band_px,
-                slack_px=edge_slack_px, ratio=edge_ratio, min_step=edge_min_step,
-                end_px=int(round(edge_end_m / cell_m)))
+                slack_px=edge_slack_px, ratio=options.edge_ratio, min_step=options.edge_min_step,
+                end_px=int(round(options.edge_end_m / cell_m)))
         keep = np.flatnonzero(keep)
         found.append(np.stack([r0[keep], c0[keep], w_index[keep], l_index[keep],
                                np.full(len(keep), index), s_bd[keep], s_int[keep]], axis=1))
@@ -423,8 +455,8 @@ def road_hypotheses(image: GeoRaster, magnitude, orientation_rad, labels, *,
     report(progress, 1.0, "road hypotheses done")
 
     found = np.concatenate(found) if found else np.empty((0, 7))
-    score = beta_bd * found[:, 5] + beta_int * found[:, 6]
-    order = np.argsort(-score, kind="stable")[:max_hypotheses]
+    score = options.beta_bd * found[:, 5] + options.beta_int * found[:, 6]
+    order = np.argsort(-score, kind="stable")[:options.max_hypotheses]
     found, score = found[order], score[order]
     r0, c0, w_index, l_index, o_index = found[:, :5].astype(np.int64).T
     polygons, x0, y0 = _rectangles_on_map(np.array(to_map).reshape(-1, 9)[o_index], r0, c0,

@@ -11,8 +11,9 @@ from scipy import ndimage
 from gisroads.features.edges import local_energy
 from gisroads.features.rectangles import interior_sign
 from gisroads.geo import GeoRaster
-from gisroads.lidar.hypotheses import (DEFAULT_WIDTHS_M, L_MAX, likelihood_maps,
-                                       road_hypotheses)
+from gisroads.jobs.common import stage_default
+from gisroads.lidar.hypotheses import (DEFAULT_WIDTHS_M, L_MAX, T_BD, HypothesisOptions,
+                                       likelihood_maps, road_hypotheses)
 
 CELL_M = 0.5
 SIZE_M = 300.0
@@ -221,6 +222,23 @@ def test_windows_start_on_the_kerb_where_the_segments_split_at_the_sidewalk():
     stubby = road_hypotheses(raster, zeros, zeros, labels, widths_m=(10.0,),
                              lengths_m=(20.0, 40.0), orientations_rad=[0.0])
     assert set(stubby["length_m"]) == {40.0}
+    # the options as one object give what the keywords give
+    options = HypothesisOptions(snap_m=0.0, edge_ratio=0.0, **kwargs)
+    np.testing.assert_array_equal(
+        road_hypotheses(raster, zeros, zeros, labels, options)["width_m"],
+        unsnapped["width_m"])
+
+
+def test_options_are_one_object_with_the_papers_defaults():
+    assert stage_default(road_hypotheses, "t_bd") == HypothesisOptions().t_bd == T_BD
+    assert stage_default(road_hypotheses, "widths_m") == DEFAULT_WIDTHS_M
+    with pytest.raises(KeyError, match="no parameter 'lanes'"):
+        stage_default(road_hypotheses, "lanes")
+    image = GeoRaster(np.zeros((10, 10), np.float32), TRANSFORM, CRS_)
+    with pytest.raises(TypeError, match="lanes"):
+        road_hypotheses(image, image.data, image.data, np.zeros((10, 10), np.int32), lanes=2)
+    with pytest.raises(AttributeError):
+        HypothesisOptions().t_bd = 0.5  # frozen: a default cannot be changed by accident
 
 
 def test_missing_data_counts_as_missing():
