@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+from dataclasses import dataclass, replace
 
 import geopandas as gpd
 import numpy as np
@@ -788,31 +789,13 @@ def merge_close_junctions(lines, width_m, score, *,
 
 # --- 5. the stage ---------------------------------------------------------------------------
 
-def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
-                       tolerance_m: float = TOLERANCE_M,
-                       min_search_radius_m: float = MIN_SEARCH_RADIUS_M,
-                       max_search_radius_m: float = MAX_SEARCH_RADIUS_M,
-                       collinear_deg: float = COLLINEAR_DEG,
-                       end_window_m: float = END_WINDOW_M,
-                       parallel_margin_m: float = PARALLEL_MARGIN_M,
-                       parallel_share: float = PARALLEL_SHARE,
-                       overlap_share: float = OVERLAP_SHARE,
-                       min_total_length_m: float = MIN_TOTAL_LENGTH_M,
-                       border_m: float = BORDER_M, overshoot_m: float = OVERSHOOT_M,
-                       junction_merge_m: float = JUNCTION_MERGE_M, method: str = METHOD,
-                       unsupported=None, max_unsupported_m: float = np.inf,
-                       progress: Progress = None) -> tuple[RoadNetwork, gpd.GeoDataFrame]:
-    """Road strings to the road-network contract (steps 1-5 of the module docstring).
+@dataclass(frozen=True)
+class NetworkOptions:
+    """The options of :func:`strings_to_network`: approximation, duplicates, junctions and
+    significance (steps 1-5 of the module docstring).
 
-    Parameters
+    Attributes
     ----------
-    road_strings : GeoDataFrame
-        One LineString per road string with ``width_m`` and ``quality`` (see
-        :func:`approximate_strings`).
-    extent : (xmin, ymin, xmax, ymax), optional
-        The image extent, for the border rule of :func:`significant_components`.
-    crs : optional
-        CRS of strings that carry none; must agree with theirs otherwise.
     tolerance_m : float
         See :func:`approximate_strings`.
     min_search_radius_m, max_search_radius_m, collinear_deg, end_window_m, overshoot_m : float
@@ -825,10 +808,47 @@ def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
         See :func:`significant_components`.
     junction_merge_m : float
         See :func:`merge_close_junctions`.
+    """
+
+    tolerance_m: float = TOLERANCE_M
+    min_search_radius_m: float = MIN_SEARCH_RADIUS_M
+    max_search_radius_m: float = MAX_SEARCH_RADIUS_M
+    collinear_deg: float = COLLINEAR_DEG
+    end_window_m: float = END_WINDOW_M
+    parallel_margin_m: float = PARALLEL_MARGIN_M
+    parallel_share: float = PARALLEL_SHARE
+    overlap_share: float = OVERLAP_SHARE
+    min_total_length_m: float = MIN_TOTAL_LENGTH_M
+    border_m: float = BORDER_M
+    overshoot_m: float = OVERSHOOT_M
+    junction_merge_m: float = JUNCTION_MERGE_M
+    unsupported: object = None
+    max_unsupported_m: float = np.inf
+
+
+def strings_to_network(road_strings: gpd.GeoDataFrame,
+                       options: NetworkOptions = NetworkOptions(), *, extent=None, crs=None,
+                       method: str = METHOD, progress: Progress = None,
+                       **changes) -> tuple[RoadNetwork, gpd.GeoDataFrame]:
+    """Road strings to the road-network contract (steps 1-5 of the module docstring).
+
+    Parameters
+    ----------
+    road_strings : GeoDataFrame
+        One LineString per road string with ``width_m`` and ``quality`` (see
+        :func:`approximate_strings`).
+    extent : (xmin, ymin, xmax, ymax), optional
+        The image extent, for the border rule of :func:`significant_components`.
+    crs : optional
+        CRS of strings that carry none; must agree with theirs otherwise.
+    options : NetworkOptions
+        Approximation, duplicates, junctions and significance (:class:`NetworkOptions`).
     method : str
         The ``method`` of every centre line.
     progress : callable, optional
         ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
@@ -840,6 +860,7 @@ def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
         Every hypothesis of :func:`find_junctions` plus ``component`` and ``significant``
         from :func:`significant_components`.
     """
+    options = replace(options, **changes)
     _check_frame(road_strings, ("width_m", "quality"))
     if crs is not None and road_strings.crs is not None and road_strings.crs != crs:
         raise GisroadsError(f"road strings are in {road_strings.crs.name}, not in the given "
@@ -847,21 +868,22 @@ def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
     if road_strings.crs is None and crs is not None:
         road_strings = road_strings.set_crs(crs)
     report(progress, 0.0, "approximating road strings")
-    roads = approximate_strings(road_strings, tolerance_m=tolerance_m)
+    roads = approximate_strings(road_strings, tolerance_m=options.tolerance_m)
     report(progress, 0.15, "removing duplicate roads")
-    roads = remove_duplicates(roads, parallel_margin_m=parallel_margin_m,
-                              parallel_share=parallel_share, collinear_deg=collinear_deg,
-                              overlap_share=overlap_share)
+    roads = remove_duplicates(roads, parallel_margin_m=options.parallel_margin_m,
+                              parallel_share=options.parallel_share,
+                              collinear_deg=options.collinear_deg,
+                              overlap_share=options.overlap_share)
     report(progress, 0.3, "searching junctions")
     roads, connections = find_junctions(
-        roads, min_search_radius_m=min_search_radius_m,
-        max_search_radius_m=max_search_radius_m, collinear_deg=collinear_deg,
-        end_window_m=end_window_m, overshoot_m=overshoot_m, unsupported=unsupported,
-        max_unsupported_m=max_unsupported_m)
+        roads, min_search_radius_m=options.min_search_radius_m,
+        max_search_radius_m=options.max_search_radius_m, collinear_deg=options.collinear_deg,
+        end_window_m=options.end_window_m, overshoot_m=options.overshoot_m,
+        unsupported=options.unsupported, max_unsupported_m=options.max_unsupported_m)
     report(progress, 0.7, "checking connected components")
     roads, connections = significant_components(roads, connections,
-                                                min_total_length_m=min_total_length_m,
-                                                extent=extent, border_m=border_m)
+                                                min_total_length_m=options.min_total_length_m,
+                                                extent=extent, border_m=options.border_m)
     report(progress, 0.8, "building the network")
     kept_roads = roads[roads["significant"].to_numpy(bool)]
     kept_links = connections[connections["significant"].to_numpy(bool)
@@ -878,9 +900,9 @@ def strings_to_network(road_strings: gpd.GeoDataFrame, *, extent=None, crs=None,
             crs=roads.crs), method=method, qa=qa)
     else:
         merged, width, score = node_roads(lines.astype(object), width, score,
-                                          join_gap_m=overshoot_m, min_length_m=0.0)
+                                          join_gap_m=options.overshoot_m, min_length_m=0.0)
         merged, width, score = merge_close_junctions(merged, width, score,
-                                                     junction_merge_m=junction_merge_m)
+                                                     junction_merge_m=options.junction_merge_m)
         network = network_from_centrelines(gpd.GeoDataFrame(
             {"road_id": np.arange(len(merged), dtype=np.int64), "width_m": width,
              "score": score, "method": method},
