@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import heapq
 import re
+from dataclasses import dataclass, replace
 
 import geopandas as gpd
 import numpy as np
@@ -384,14 +385,31 @@ def _pixel_window(polygon, transform: Affine, shape):
     return slice(r0, r1), slice(c0, c1)
 
 
-def gap_context(gaps: gpd.GeoDataFrame, *, transform: Affine, ndvi=None, ndsm=None,
-                intensity=None, rgb=None, ndvi_vegetation: float = 0.3,
-                exg_vegetation: float = 0.1, tree_height_m: float = 2.0,
-                vehicle_height_m: float = 1.0, building_height_m: float = 2.5,
-                max_vehicle_m2: float = 15.0, shadow_intensity: float = 0.15,
-                bright_intensity: float = 0.85, grey_saturation: float = 0.35,
-                smooth_m: float = 1.0, min_object_m2: float = 1.0,
-                progress: Progress = None) -> gpd.GeoDataFrame:
+@dataclass(frozen=True)
+class ContextOptions:
+    """The thresholds of :func:`gap_context`, which tell its context classes apart (its
+    docstring says how each is used): NDVI and excess green of vegetation, heights above
+    ground (metres), the largest vehicle (square metres), intensity of shadow and of bright
+    surfaces (0..1), the greyness of asphalt (HSV saturation), the majority-vote square and
+    the least object (metres, square metres).
+    """
+
+    ndvi_vegetation: float = 0.3
+    exg_vegetation: float = 0.1
+    tree_height_m: float = 2.0
+    vehicle_height_m: float = 1.0
+    building_height_m: float = 2.5
+    max_vehicle_m2: float = 15.0
+    shadow_intensity: float = 0.15
+    bright_intensity: float = 0.85
+    grey_saturation: float = 0.35
+    smooth_m: float = 1.0
+    min_object_m2: float = 1.0
+
+
+def gap_context(gaps: gpd.GeoDataFrame, options: ContextOptions = ContextOptions(), *,
+                transform: Affine, ndvi=None, ndsm=None, intensity=None, rgb=None,
+                progress: Progress = None, **changes) -> gpd.GeoDataFrame:
     """Context objects in each gap's road-part hypothesis and its occluded share (Sec. 2.2.2).
 
     The hypothesis is the gap line buffered by half its ``width_m`` (flat caps). Inside it,
@@ -420,7 +438,11 @@ def gap_context(gaps: gpd.GeoDataFrame, *, transform: Affine, ndvi=None, ndsm=No
     rgb : ndarray (3, rows, cols), optional
         Red, green, blue (0..1): vegetation without NIR, greyness, and the intensity when
         ``intensity`` is not given.
+    options : ContextOptions
+        The thresholds of the context classes (:class:`ContextOptions`).
     progress : callable, optional
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
@@ -431,6 +453,7 @@ def gap_context(gaps: gpd.GeoDataFrame, *, transform: Affine, ndvi=None, ndsm=No
         used). All NaN where the hypothesis has no valid pixel (off the rasters, zero
         length).
     """
+    options = replace(options, **changes)
     rasters = {"ndvi": ndvi, "ndsm": ndsm, "intensity": intensity, "rgb": rgb}
     given = {k: np.asarray(v) for k, v in rasters.items() if v is not None}
     if not given:
@@ -446,8 +469,8 @@ def gap_context(gaps: gpd.GeoDataFrame, *, transform: Affine, ndvi=None, ndsm=No
         raise GisroadsError("gaps lacks the width_m column (use gap_edges)")
     shape = next(iter(shapes.values()))
     pixel_m2 = abs(transform.a * transform.e - transform.b * transform.d)
-    min_pixels = max(1, int(np.ceil(min_object_m2 / pixel_m2)))
-    smooth_px = 2 * int(round(smooth_m / np.sqrt(pixel_m2) / 2)) + 1
+    min_pixels = max(1, int(np.ceil(options.min_object_m2 / pixel_m2)))
+    smooth_px = 2 * int(round(options.smooth_m / np.sqrt(pixel_m2) / 2)) + 1
     kinds = ("building", "vehicle", "tree", "vegetated_area", "shadow", "asphalt")
     counts = np.full((len(gaps), len(kinds)), np.nan)
     occlusion = np.full(len(gaps), np.nan)
@@ -470,15 +493,15 @@ def gap_context(gaps: gpd.GeoDataFrame, *, transform: Affine, ndvi=None, ndsm=No
             continue
         masks = _object_masks(
             cut.get("ndvi"), cut.get("ndsm"), cut.get("intensity"), cut.get("rgb"),
-            ndvi_vegetation=ndvi_vegetation, exg_vegetation=exg_vegetation,
-            tree_height_m=tree_height_m, vehicle_height_m=vehicle_height_m,
-            shadow_intensity=shadow_intensity, bright_intensity=bright_intensity,
-            grey_saturation=grey_saturation)
+            ndvi_vegetation=options.ndvi_vegetation, exg_vegetation=options.exg_vegetation,
+            tree_height_m=options.tree_height_m, vehicle_height_m=options.vehicle_height_m,
+            shadow_intensity=options.shadow_intensity, bright_intensity=options.bright_intensity,
+            grey_saturation=options.grey_saturation)
         masks = {name: _majority(mask & valid, smooth_px) & valid
                  for name, mask in masks.items()}
         buildings, vehicles, vehicle_mask = _raised_appearances(
             masks["raised"], cut.get("ndsm"), inside, min_pixels, pixel_m2,
-            building_height_m=building_height_m, max_vehicle_m2=max_vehicle_m2)
+            building_height_m=options.building_height_m, max_vehicle_m2=options.max_vehicle_m2)
         counts[k] = [buildings, vehicles] + [_appearances(masks[name], inside, min_pixels)
                                              for name in kinds[2:]]
         occluded = masks["tree"] | masks["shadow"] | vehicle_mask
