@@ -35,6 +35,7 @@ Centre line
 """
 from __future__ import annotations
 
+from dataclasses import asdict, dataclass, replace
 from typing import NamedTuple
 
 import geopandas as gpd
@@ -78,25 +79,111 @@ SEGMENT_COLUMNS = ["segment_id", "area_m2", "perimeter_m", "elongation", "convex
 """Attributes of :func:`measure_segments` (then ``road_probability``, ``mean_b1``,
 ``mean_b2`` ...)."""
 
-CRITERIA = {
-    "width_range_m": (3.0, 16.0),
-    "min_length_m": 15.0,
-    "elongation_min": 25.0,
-    "convexity_min": 0.75,
-    "elongation_curved_min": 70.0,
-    "convexity_curved_min": 0.2,
-    "width_constancy_min": 1.7,
-    "height_max_m": 2.0,
-    "ndvi_max": 0.2,
-    "excess_green_max": 0.05,
-    "saturation_max": 0.18,
-    "intensity_range": (0.1, 0.9),
-    "intensity_std_max": 0.2,
-    "edge_contrast_min": 0.0,
-    "road_width_m": 7.0,
-    "probability_min": 0.3,
-}
-"""Defaults of :func:`filter_road_parts` (see there for their sources)."""
+
+@dataclass(frozen=True)
+class RoadPartCriteria:
+    """The road-part criteria of :func:`filter_road_parts`.
+
+    Defaults: Grote et al. (2009), Table 1, where it gives a value (width 3-16 m, minimum
+    width constancy 1.7, minimum elongation 70), converted where the scale differs; the
+    rest chosen here and stated below.
+
+    Attributes
+    ----------
+    width_range_m : (min, max)
+        Road widths in metres (Table 1: 3-16 m).
+    min_length_m : float
+        Shortest road part, metres (not in Table 1: 15 m keeps a short piece between two
+        trees, drops car-sized blobs).
+    elongation_min, convexity_min : float
+        Every part needs ``elongation >= elongation_min`` (25: a 4:1 rectangle; 16 is a
+        square); a part that elongated needs ``convexity >= convexity_min`` (0.75). Grote &
+        Heipke (2008) let convex parts be less elongated than Table 1's 70, so short
+        straight parts pass while ragged regions, elongated by their border alone, do not.
+    elongation_curved_min, convexity_curved_min : float
+        The relaxation for curved parts (2010: "the convexity can be lower than the
+        threshold if the elongation is high"; the criteria are "balanced against each
+        other"): the convexity needed falls linearly with the elongation, from
+        ``convexity_min`` at ``elongation_min`` to ``convexity_curved_min`` (0.2) at
+        ``elongation_curved_min`` (Table 1's minimum elongation, 70) and beyond. Setting
+        ``convexity_curved_min = convexity_min`` turns the relaxation off.
+    width_constancy_min : float
+        Mean / std of the width (Table 1: 1.7).
+    height_max_m : float
+        Largest mean height above ground in the nDSM (2 m: a car on a lane lifts a
+        segment's mean by centimetres, a roof by metres). Skipped without a DSM.
+    ndvi_max : float
+        Largest mean NDVI. Table 1 has 0 for scanned CIR film; the paper adapted this
+        threshold per data set. 0.2 separates asphalt (about 0) from grass (0.4).
+    excess_green_max : float
+        Largest mean excess green (:func:`gisroads.imagery.cues.excess_green`), the
+        vegetation test of RGB images without NIR, which the paper did not need (its images
+        were CIR): 0.05 keeps grey and brown surfaces, lawns and trees are above 0.1. Skipped
+        where the NDVI test applies and for panchromatic and CIR images.
+    saturation_max : float
+        Largest mean saturation (HSV ``(max - min) / max`` of the stretched bands 1-3) of
+        RGB images without NIR; skipped for CIR and panchromatic images. The RGB analogue
+        of the NDVI test (Sec. 2.1.3 asks for road parts that are not vegetation and have
+        the radiometry of a road surface): asphalt, concrete and gravel are grey, while
+        what else forms elongated regions in RGB images (vegetation and its shadow, brown
+        soil, red tiles, coloured roofs) is not; the excess-green test catches only green.
+        Computed on the raw values of every pixel (:func:`gisroads.imagery.cues.saturation`),
+        so it is independent of the image's stretch. 0.18: on the grouped segments of the
+        13 real benchmark images, passing segments lying on roads have a median saturation
+        of 0.11-0.17 (Massachusetts, Paris, ETH, DeepGlobe), passing off-road segments
+        (leaf-off forest and its shadow stripes, soil, tiled roofs) 0.16-0.23; the whole
+        pipeline's mean completeness / correctness / quality went 0.325 / 0.189 / 0.136
+        without the test to 0.309 / 0.316 / 0.183 (0.15: 0.270 / 0.359 / 0.174; 0.22:
+        0.322 / 0.252 / 0.164). Tested after the intensity tests, so a noisy dark shadow,
+        whose pixel saturation is unstable, fails as "too dark".
+    intensity_range : (min, max)
+        Mean intensity bounds in [0, 1] (see :func:`gisroads.imagery.cues.intensity`):
+        Table 1's minimum 40 of 255 is 0.1 after a typical 1-99 % stretch (0.15 dropped 5 %
+        of the false road-part length on six real crops but lost roads in building shadows
+        of the synthetic scenes: whole-pipeline completeness 0.81 -> 0.77); above 0.9 are
+        white roofs and paint.
+    intensity_std_max : float
+        Largest intensity standard deviation (Table 1: 50 of 255 for colour, 0.2 here).
+    edge_contrast_min : float
+        Smallest ``edge_contrast`` (border over inner edge strength), an addition to the
+        papers' criteria: their segmentation puts segment borders on edges, so a road part
+        is a homogeneous region bounded by edges, while NCut regions cut out of texture
+        (forest, fields, leaf-off tree shadows) are as elongated but have no stronger
+        edges on their border than inside. Off (0) by default: over the passing parts of
+        five real images 1.2 kept 65 % of the on-road length and 28 % of the off-road
+        length, but on the 13 scored benchmark images the whole pipeline's mean
+        completeness / correctness / quality went 0.325 / 0.189 / 0.136 -> 0.262 / 0.216 /
+        0.133 (1.1: 0.295 / 0.205 / 0.138), no gain; raise it on textured scenes.
+    road_width_m : float
+        The typical road width the quality measure rewards (:func:`road_part_quality`).
+    probability_min : float
+        Smallest mean learned road probability (``road_probability``, measured when the
+        cues hold a model's probability, :mod:`gisroads.learn`; beyond the papers). Where a
+        segment has one, it replaces the colour tests of RGB images (the excess-green
+        vegetation test and the saturation test; the NDVI test of a NIR band stays) and
+        joins the quality measure; segments without one take the colour tests.
+    """
+
+    width_range_m: tuple = (3.0, 16.0)
+    min_length_m: float = 15.0
+    elongation_min: float = 25.0
+    convexity_min: float = 0.75
+    elongation_curved_min: float = 70.0
+    convexity_curved_min: float = 0.2
+    width_constancy_min: float = 1.7
+    height_max_m: float = 2.0
+    ndvi_max: float = 0.2
+    excess_green_max: float = 0.05
+    saturation_max: float = 0.18
+    intensity_range: tuple = (0.1, 0.9)
+    intensity_std_max: float = 0.2
+    edge_contrast_min: float = 0.0
+    road_width_m: float = 7.0
+    probability_min: float = 0.3
+
+
+CRITERIA = asdict(RoadPartCriteria())
+"""The defaults of :class:`RoadPartCriteria` by name."""
 
 TESTS = ("not elongated", "not convex", "too narrow", "too wide", "irregular width",
          "too short", "too high", "vegetation", "too dark", "too bright", "textured",
@@ -486,105 +573,18 @@ def road_part_quality(segments: pd.DataFrame, *, road_width_m: float = 7.0,
         return np.nanmean(np.vstack(rows), axis=0)
 
 
-def filter_road_parts(segments: gpd.GeoDataFrame, *,
-                      width_range_m=CRITERIA["width_range_m"],
-                      min_length_m: float = CRITERIA["min_length_m"],
-                      elongation_min: float = CRITERIA["elongation_min"],
-                      convexity_min: float = CRITERIA["convexity_min"],
-                      elongation_curved_min: float = CRITERIA["elongation_curved_min"],
-                      convexity_curved_min: float = CRITERIA["convexity_curved_min"],
-                      width_constancy_min: float = CRITERIA["width_constancy_min"],
-                      height_max_m: float = CRITERIA["height_max_m"],
-                      ndvi_max: float = CRITERIA["ndvi_max"],
-                      excess_green_max: float = CRITERIA["excess_green_max"],
-                      saturation_max: float = CRITERIA["saturation_max"],
-                      intensity_range=CRITERIA["intensity_range"],
-                      intensity_std_max: float = CRITERIA["intensity_std_max"],
-                      edge_contrast_min: float = CRITERIA["edge_contrast_min"],
-                      road_width_m: float = CRITERIA["road_width_m"],
-                      probability_min: float = CRITERIA["probability_min"]):
+def filter_road_parts(segments: gpd.GeoDataFrame,
+                      criteria: RoadPartCriteria = RoadPartCriteria(), **changes):
     """Test every measured segment against the road-part criteria.
-
-    Defaults: Grote et al. (2009), Table 1, where it gives a value (width 3-16 m, minimum
-    width constancy 1.7, minimum elongation 70), converted where the scale differs; the
-    rest chosen here and stated below.
 
     Parameters
     ----------
     segments : GeoDataFrame
         From :func:`measure_segments`.
-    width_range_m : (min, max)
-        Road widths in metres (Table 1: 3-16 m).
-    min_length_m : float
-        Shortest road part, metres (not in Table 1: 15 m keeps a short piece between two
-        trees, drops car-sized blobs).
-    elongation_min, convexity_min : float
-        Every part needs ``elongation >= elongation_min`` (25: a 4:1 rectangle; 16 is a
-        square); a part that elongated needs ``convexity >= convexity_min`` (0.75). Grote &
-        Heipke (2008) let convex parts be less elongated than Table 1's 70, so short
-        straight parts pass while ragged regions, elongated by their border alone, do not.
-    elongation_curved_min, convexity_curved_min : float
-        The relaxation for curved parts (2010: "the convexity can be lower than the
-        threshold if the elongation is high"; the criteria are "balanced against each
-        other"): the convexity needed falls linearly with the elongation, from
-        ``convexity_min`` at ``elongation_min`` to ``convexity_curved_min`` (0.2) at
-        ``elongation_curved_min`` (Table 1's minimum elongation, 70) and beyond. Setting
-        ``convexity_curved_min = convexity_min`` turns the relaxation off.
-    width_constancy_min : float
-        Mean / std of the width (Table 1: 1.7).
-    height_max_m : float
-        Largest mean height above ground in the nDSM (2 m: a car on a lane lifts a
-        segment's mean by centimetres, a roof by metres). Skipped without a DSM.
-    ndvi_max : float
-        Largest mean NDVI. Table 1 has 0 for scanned CIR film; the paper adapted this
-        threshold per data set. 0.2 separates asphalt (about 0) from grass (0.4).
-    excess_green_max : float
-        Largest mean excess green (:func:`gisroads.imagery.cues.excess_green`), the
-        vegetation test of RGB images without NIR, which the paper did not need (its images
-        were CIR): 0.05 keeps grey and brown surfaces, lawns and trees are above 0.1. Skipped
-        where the NDVI test applies and for panchromatic and CIR images.
-    saturation_max : float
-        Largest mean saturation (HSV ``(max - min) / max`` of the stretched bands 1-3) of
-        RGB images without NIR; skipped for CIR and panchromatic images. The RGB analogue
-        of the NDVI test (Sec. 2.1.3 asks for road parts that are not vegetation and have
-        the radiometry of a road surface): asphalt, concrete and gravel are grey, while
-        what else forms elongated regions in RGB images (vegetation and its shadow, brown
-        soil, red tiles, coloured roofs) is not; the excess-green test catches only green.
-        Computed on the raw values of every pixel (:func:`gisroads.imagery.cues.saturation`),
-        so it is independent of the image's stretch. 0.18: on the grouped segments of the
-        13 real benchmark images, passing segments lying on roads have a median saturation
-        of 0.11-0.17 (Massachusetts, Paris, ETH, DeepGlobe), passing off-road segments
-        (leaf-off forest and its shadow stripes, soil, tiled roofs) 0.16-0.23; the whole
-        pipeline's mean completeness / correctness / quality went 0.325 / 0.189 / 0.136
-        without the test to 0.309 / 0.316 / 0.183 (0.15: 0.270 / 0.359 / 0.174; 0.22:
-        0.322 / 0.252 / 0.164). Tested after the intensity tests, so a noisy dark shadow,
-        whose pixel saturation is unstable, fails as "too dark".
-    intensity_range : (min, max)
-        Mean intensity bounds in [0, 1] (see :func:`gisroads.imagery.cues.intensity`):
-        Table 1's minimum 40 of 255 is 0.1 after a typical 1-99 % stretch (0.15 dropped 5 %
-        of the false road-part length on six real crops but lost roads in building shadows
-        of the synthetic scenes: whole-pipeline completeness 0.81 -> 0.77); above 0.9 are
-        white roofs and paint.
-    intensity_std_max : float
-        Largest intensity standard deviation (Table 1: 50 of 255 for colour, 0.2 here).
-    edge_contrast_min : float
-        Smallest ``edge_contrast`` (border over inner edge strength), an addition to the
-        papers' criteria: their segmentation puts segment borders on edges, so a road part
-        is a homogeneous region bounded by edges, while NCut regions cut out of texture
-        (forest, fields, leaf-off tree shadows) are as elongated but have no stronger
-        edges on their border than inside. Off (0) by default: over the passing parts of
-        five real images 1.2 kept 65 % of the on-road length and 28 % of the off-road
-        length, but on the 13 scored benchmark images the whole pipeline's mean
-        completeness / correctness / quality went 0.325 / 0.189 / 0.136 -> 0.262 / 0.216 /
-        0.133 (1.1: 0.295 / 0.205 / 0.138), no gain; raise it on textured scenes.
-    road_width_m : float
-        The typical road width the quality measure rewards (:func:`road_part_quality`).
-    probability_min : float
-        Smallest mean learned road probability (``road_probability``, measured when the
-        cues hold a model's probability, :mod:`gisroads.learn`; beyond the papers). Where a
-        segment has one, it replaces the colour tests of RGB images (the excess-green
-        vegetation test and the saturation test; the NDVI test of a NIR band stays) and
-        joins the quality measure; segments without one take the colour tests.
+    criteria : RoadPartCriteria
+        The criteria; defaults from Grote et al. (2009), Table 1.
+    **changes
+        Fields of ``criteria`` to change for this call.
 
     Returns
     -------
@@ -595,15 +595,8 @@ def filter_road_parts(segments: gpd.GeoDataFrame, *,
         One LineString per passing segment, its centre line: ``part_id``, ``segment_id``,
         ``width_m``, ``length_m``, ``quality``, ``mean_b1`` ..., ``mean_intensity``.
     """
-    out = segments.assign(**_verdict(segments, dict(
-        width_range_m=width_range_m, min_length_m=min_length_m, elongation_min=elongation_min,
-        convexity_min=convexity_min, elongation_curved_min=elongation_curved_min,
-        convexity_curved_min=convexity_curved_min, width_constancy_min=width_constancy_min,
-        height_max_m=height_max_m, ndvi_max=ndvi_max, excess_green_max=excess_green_max,
-        saturation_max=saturation_max,
-        intensity_range=intensity_range,
-        intensity_std_max=intensity_std_max, edge_contrast_min=edge_contrast_min,
-        road_width_m=road_width_m, probability_min=probability_min)))
+    criteria = replace(criteria, **changes)
+    out = segments.assign(**_verdict(segments, asdict(criteria)))
     return out, _road_part_layer(out)
 
 
