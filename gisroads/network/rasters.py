@@ -47,6 +47,8 @@ Every distance is in metres, so one set of defaults serves 0.3-1 m pixels.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import geopandas as gpd
 import numpy as np
 import pandas as pd
@@ -375,22 +377,14 @@ def _heading(xy: np.ndarray, window_m: float) -> np.ndarray:
     return d / norm if norm > 0 else np.zeros(2)
 
 
-def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
-                   smooth_m: float = SMOOTH_M, max_hole_m2: float = MAX_HOLE_M2,
-                   min_area_m2: float = MIN_AREA_M2, spur_m: float = SPUR_M,
-                   junction_merge_m: float = JUNCTION_MERGE_M,
-                   straighten: float = STRAIGHTEN, simplify_m: float = SIMPLIFY_M,
-                   max_width_m: float = MAX_WIDTH_M, tile_px: int = TILE_PX,
-                   overlap_px: int = OVERLAP_PX, low_threshold: float | None = None,
-                   max_cut_m: float = MAX_CUT_M,
-                   progress: Progress = None) -> gpd.GeoDataFrame:
-    """Road parts of a probability raster: clean centre lines split at junctions.
+@dataclass(frozen=True)
+class PartOptions:
+    """The options of :func:`skeleton_parts`: cleaning the road mask, pruning and
+    straightening its skeleton, and the tiles it is computed in.
 
-    Parameters
+    Attributes
     ----------
-    probability : GeoRaster
-        2-D, 0-1, NaN = no data (see :func:`road_probability`), projected CRS in metres.
-    threshold, smooth_m, max_hole_m2, min_area_m2, low_threshold : float
+    smooth_m, max_hole_m2, min_area_m2, low_threshold : float
         See :func:`road_mask` (the hysteresis of ``low_threshold`` connects within a tile
         and its overlap).
     spur_m : float
@@ -411,7 +405,38 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
     max_cut_m : float
         Cuts across roads up to this long are closed in the mask before the skeleton
         (:func:`gisroads.network.cuts.bridge_cuts`), metres; 0: none.
+    """
+
+    smooth_m: float = SMOOTH_M
+    max_hole_m2: float = MAX_HOLE_M2
+    min_area_m2: float = MIN_AREA_M2
+    spur_m: float = SPUR_M
+    junction_merge_m: float = JUNCTION_MERGE_M
+    straighten: float = STRAIGHTEN
+    simplify_m: float = SIMPLIFY_M
+    max_width_m: float = MAX_WIDTH_M
+    tile_px: int = TILE_PX
+    overlap_px: int = OVERLAP_PX
+    low_threshold: float | None = None
+    max_cut_m: float = MAX_CUT_M
+
+
+def skeleton_parts(probability: GeoRaster, options: PartOptions = PartOptions(), *,
+                   threshold: float = THRESHOLD, progress: Progress = None,
+                   **changes) -> gpd.GeoDataFrame:
+    """Road parts of a probability raster: clean centre lines split at junctions.
+
+    Parameters
+    ----------
+    probability : GeoRaster
+        2-D, 0-1, NaN = no data (see :func:`road_probability`), projected CRS in metres.
+    threshold : float
+        See :func:`road_mask`.
+    options : PartOptions
+        Mask cleaning, skeleton pruning and tiles (:class:`PartOptions`).
     progress : callable, optional
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
@@ -419,26 +444,29 @@ def skeleton_parts(probability: GeoRaster, *, threshold: float = THRESHOLD,
         LineStrings with ``part_id``, ``width_m`` (mean of twice the distance to the mask
         border along the line, metres) and ``quality`` (mean probability along the line).
     """
-    if tile_px < 64 or overlap_px < 0:
+    options = replace(options, **changes)
+    if options.tile_px < 64 or options.overlap_px < 0:
         raise GisroadsError("tile_px must be at least 64 and overlap_px at least 0")
-    mask_options = dict(threshold=threshold, smooth_m=smooth_m, max_hole_m2=max_hole_m2,
-                        min_area_m2=min_area_m2, low_threshold=low_threshold)
-    lines, width = _raw_skeleton(probability, tile_px=tile_px, overlap_px=overlap_px,
-                                 mask_options=mask_options, max_cut_m=max_cut_m,
+    mask_options = dict(threshold=threshold, smooth_m=options.smooth_m,
+                        max_hole_m2=options.max_hole_m2, min_area_m2=options.min_area_m2,
+                        low_threshold=options.low_threshold)
+    lines, width = _raw_skeleton(probability, tile_px=options.tile_px,
+                                 overlap_px=options.overlap_px,
+                                 mask_options=mask_options, max_cut_m=options.max_cut_m,
                                  progress=scaled(progress, 0.0, 0.8))
     report(progress, 0.8, "pruning spurs, contracting junctions")
     crs = probability.crs
     if len(lines):
         score = np.zeros(len(lines))
-        lines, width, score = node_roads(lines, width, score, join_gap_m=spur_m,
+        lines, width, score = node_roads(lines, width, score, join_gap_m=options.spur_m,
                                          min_length_m=0.0)
         lines, width, score = merge_close_junctions(lines, width, score,
-                                                    junction_merge_m=junction_merge_m)
-        lines, width, score = node_roads(lines, width, score, join_gap_m=spur_m,
+                                                    junction_merge_m=options.junction_merge_m)
+        lines, width, score = node_roads(lines, width, score, join_gap_m=options.spur_m,
                                          min_length_m=0.0)
-        lines = _straighten(lines, straighten * width / 2)
-        lines = shapely.simplify(lines, simplify_m, preserve_topology=False)
-        usable = (shapely.length(lines) > 0) & (width <= max_width_m)
+        lines = _straighten(lines, options.straighten * width / 2)
+        lines = shapely.simplify(lines, options.simplify_m, preserve_topology=False)
+        usable = (shapely.length(lines) > 0) & (width <= options.max_width_m)
         lines, width = lines[usable], width[usable]
     quality = _sample(probability, lines, probability.pixel_size) if len(lines) else []
     report(progress, 1.0, f"{len(lines)} road parts")
