@@ -53,6 +53,8 @@ urban environment. ISPRS Journal of Photogrammetry and Remote Sensing 66 (6), S2
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import numpy as np
 import shapely
 from affine import Affine
@@ -277,25 +279,12 @@ def kerb_term(x, y, z, transform: Affine, shape) -> np.ndarray:
     return kerb_membership(kerb_steps(lowest.reshape(shape), abs(transform.a)))
 
 
-def attractor_map(points_xyz: np.ndarray, line_xy: np.ndarray, plane_normal=(0.0, 0.0, 1.0),
-                  *, cell_m: float = 0.5, alpha: float = ALPHA_ATTR, beta: float = BETA_ATTR,
-                  detector: str = "exp", k_neighbours: int = MIN_NEIGHBOURS,
-                  lane_m: float = LANE_M, min_lanes: float = 1.0, max_lanes: float = 6.0,
-                  drop_off_weight: float = DROP_OFF_WEIGHT, kerbs: bool = True, curb=None,
-                  crs=None) -> GeoRaster:
-    """Attractor map ``a = alpha e + beta c`` of one road patch on a grid (Sec. 2.3).
+@dataclass(frozen=True)
+class AttractorOptions:
+    """The options of :func:`attractor_map` (Table 1 of the paper, and the curb term beyond it).
 
-    Parameters
+    Attributes
     ----------
-    points_xyz : ndarray, shape (n, 3)
-        The patch's points (metres).
-    line_xy : ndarray, shape (k, 2) or (k, 3)
-        The patch's map line (its registered samples).
-    plane_normal : array_like, shape (3,) or (n, 3)
-        Support-plane normal ``n_s`` of the patch, or per point (that of its sample).
-    cell_m : float
-        Grid cell (metres); the grid covers the map line grown by ``max_lanes`` lanes plus
-        a cell.
     alpha, beta : float
         ``alpha_attr`` and ``beta_attr`` (0.2 and 1, Table 1).
     detector : {"exp", "step", "none"}
@@ -310,36 +299,72 @@ def attractor_map(points_xyz: np.ndarray, line_xy: np.ndarray, plane_normal=(0.0
     kerbs : bool
         The curb term is at least the kerb membership of the ground surface's steps
         (:func:`kerb_term`; see the module docstring); False gives the paper's map.
+    """
+
+    alpha: float = ALPHA_ATTR
+    beta: float = BETA_ATTR
+    detector: str = "exp"
+    k_neighbours: int = MIN_NEIGHBOURS
+    lane_m: float = LANE_M
+    min_lanes: float = 1.0
+    max_lanes: float = 6.0
+    drop_off_weight: float = DROP_OFF_WEIGHT
+    kerbs: bool = True
+
+
+def attractor_map(points_xyz: np.ndarray, line_xy: np.ndarray, plane_normal=(0.0, 0.0, 1.0),
+                  options: AttractorOptions = AttractorOptions(), *, cell_m: float = 0.5,
+                  curb=None, crs=None, **changes) -> GeoRaster:
+    """Attractor map ``a = alpha e + beta c`` of one road patch on a grid (Sec. 2.3).
+
+    Parameters
+    ----------
+    points_xyz : ndarray, shape (n, 3)
+        The patch's points (metres).
+    line_xy : ndarray, shape (k, 2) or (k, 3)
+        The patch's map line (its registered samples).
+    plane_normal : array_like, shape (3,) or (n, 3)
+        Support-plane normal ``n_s`` of the patch, or per point (that of its sample).
+    options : AttractorOptions
+        Weights, curb detector, extent band and curb additions (:class:`AttractorOptions`).
+    cell_m : float
+        Grid cell (metres); the grid covers the map line grown by ``max_lanes`` lanes plus
+        a cell.
     curb : ndarray, shape (n,), optional
         ``c(p)`` already computed (:func:`curb_response`); computed here otherwise.
     crs : optional
         CRS of the returned raster.
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
     GeoRaster
         ``(rows, cols)`` float32; empty cells hold ``alpha e`` only.
     """
+    options = replace(options, **changes)
     xyz = np.asarray(points_xyz, float)
     line = np.asarray(line_xy, float)[:, :2]
     if len(line) < 2:
         raise GisroadsError("the map line needs at least two vertices")
     if cell_m <= 0:
         raise GisroadsError("cell_m must be positive")
-    transform, shape = patch_grid(line, cell_m=cell_m, reach_m=max_lanes * lane_m + cell_m)
+    reach_m = options.max_lanes * options.lane_m
+    transform, shape = patch_grid(line, cell_m=cell_m, reach_m=reach_m + cell_m)
     if curb is None:
-        curb = (curb_response(xyz, plane_normal, k_neighbours=k_neighbours, detector=detector)
-                if len(xyz) >= k_neighbours else np.zeros(len(xyz)))
+        curb = (curb_response(xyz, plane_normal, k_neighbours=options.k_neighbours,
+                              detector=options.detector)
+                if len(xyz) >= options.k_neighbours else np.zeros(len(xyz)))
     c, counts = cell_means(xyz[:, 0], xyz[:, 1], curb, transform, shape, with_counts=True)
-    if kerbs and len(xyz):
+    if options.kerbs and len(xyz):
         c = np.maximum(c, kerb_term(xyz[:, 0], xyz[:, 1], xyz[:, 2], transform, shape))
     rows, cols = shape
     cx = transform.c + (np.arange(cols) + 0.5) * transform.a
     cy = transform.f + (np.arange(rows) + 0.5) * transform.e
     distance = line_distance(cx[None, :], cy[:, None], line)
-    e = ((distance >= min_lanes * lane_m) & (distance <= max_lanes * lane_m)).astype(float)
-    if drop_off_weight > 0:
+    e = ((distance >= options.min_lanes * options.lane_m) & (distance <= reach_m)).astype(float)
+    if options.drop_off_weight > 0:
         # the subcloud's own cut at its reach is no edge of the surface
-        c = np.maximum(c, drop_off_weight * drop_off_edges(counts, cell_m)
-                       * (distance < max_lanes * lane_m - 1.0))
-    return GeoRaster((alpha * e + beta * c).astype(np.float32), transform, crs)
+        c = np.maximum(c, options.drop_off_weight * drop_off_edges(counts, cell_m)
+                       * (distance < reach_m - 1.0))
+    return GeoRaster((options.alpha * e + options.beta * c).astype(np.float32), transform, crs)

@@ -13,7 +13,7 @@ converted together, and the road polygons carry their ``level``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 import geopandas as gpd
@@ -103,15 +103,48 @@ class MapGuidedRoads:
     tagged_points: int | None = None
 
 
-def fit_ribbon(points_xyz: np.ndarray, line_xyz: np.ndarray, plane_normal=(0.0, 0.0, 1.0), *,
-               road_id: int = 0, curb_detector: str = "exp", cell_m: float = 0.5,
-               alpha_attr: float = ALPHA_ATTR, beta_attr: float = BETA_ATTR,
-               k_neighbours: int = MIN_NEIGHBOURS, lane_m: float = LANE_M,
-               mu: float = MU, gvf_iterations: int = GVF_ITERATIONS,
-               alpha: float = ALPHA_SNAKE, beta: float = BETA_SNAKE,
-               gamma: float = GAMMA_SNAKE, kappa: float = KAPPA_SNAKE,
-               step_m: float = STEP_M, max_iterations: int = 500,
-               smooth_m: float = SMOOTH_M, crs=None) -> Ribbon:
+@dataclass(frozen=True)
+class RibbonOptions:
+    """The options of :func:`fit_ribbon`: the attractor map, the gradient vector flow and the
+    ribbon snake of a road patch (Table 1 of the paper).
+
+    Attributes
+    ----------
+    curb_detector : {"exp", "step", "none"}
+        f_nExp, f_nStep or f_n (:func:`gisroads.snakes.attractor.curb_response`).
+    cell_m : float
+        Attractor grid cell (metres).
+    alpha_attr, beta_attr, k_neighbours, lane_m : float
+        Attractor parameters (:func:`gisroads.snakes.attractor.attractor_map`).
+    mu, gvf_iterations : float
+        GVF parameters (:func:`gisroads.snakes.gvf.gradient_vector_flow`).
+    alpha, beta, gamma, kappa, step_m, max_iterations : float
+        Snake parameters (:func:`gisroads.snakes.ribbon.ribbon_snake`).
+    smooth_m : float
+        Standard deviation (metres along the line) of the Gaussian that smooths the map
+        line before the snake takes it as its rest shape (see :data:`SMOOTH_M`).
+    """
+
+    curb_detector: str = "exp"
+    cell_m: float = 0.5
+    alpha_attr: float = ALPHA_ATTR
+    beta_attr: float = BETA_ATTR
+    k_neighbours: int = MIN_NEIGHBOURS
+    lane_m: float = LANE_M
+    mu: float = MU
+    gvf_iterations: int = GVF_ITERATIONS
+    alpha: float = ALPHA_SNAKE
+    beta: float = BETA_SNAKE
+    gamma: float = GAMMA_SNAKE
+    kappa: float = KAPPA_SNAKE
+    step_m: float = STEP_M
+    max_iterations: int = 500
+    smooth_m: float = SMOOTH_M
+
+
+def fit_ribbon(points_xyz: np.ndarray, line_xyz: np.ndarray, plane_normal=(0.0, 0.0, 1.0),
+               options: RibbonOptions = RibbonOptions(), *, road_id: int = 0, crs=None,
+               **changes) -> Ribbon:
     """Attractor map, GVF and ribbon snake of one road patch (Sec. 2.3-2.4).
 
     Parameters
@@ -122,38 +155,36 @@ def fit_ribbon(points_xyz: np.ndarray, line_xyz: np.ndarray, plane_normal=(0.0, 
         The patch's registered map samples, in order along the road.
     plane_normal : array_like, shape (3,) or (m, 3)
         Support-plane normal of the patch or of each point's sample.
-    curb_detector : {"exp", "step", "none"}
-        f_nExp, f_nStep or f_n (:func:`gisroads.snakes.attractor.curb_response`).
-    cell_m : float
-        Attractor grid cell (metres).
-    alpha_attr, beta_attr, k_neighbours, lane_m
-        Attractor parameters (:func:`gisroads.snakes.attractor.attractor_map`).
-    mu, gvf_iterations
-        GVF parameters (:func:`gisroads.snakes.gvf.gradient_vector_flow`).
-    alpha, beta, gamma, kappa, step_m, max_iterations
-        Snake parameters (:func:`gisroads.snakes.ribbon.ribbon_snake`).
-    smooth_m : float
-        Standard deviation (metres along the line) of the Gaussian that smooths the map
-        line before the snake takes it as its rest shape (see :data:`SMOOTH_M`).
+    options : RibbonOptions
+        Attractor, GVF and snake (:class:`RibbonOptions`).
+    road_id : int
+        The ribbon's road.
+    crs : optional
+        CRS of the attractor map.
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
     Ribbon
     """
+    options = replace(options, **changes)
     line = np.asarray(line_xyz, float)
-    samples, _ = resample_line(line[:, :2], step_m)
-    if smooth_m > 0:
-        samples = ndimage.gaussian_filter1d(samples, smooth_m / step_m, axis=0, mode="nearest")
-    attractor = attractor_map(points_xyz, line[:, :2], plane_normal, cell_m=cell_m,
-                              alpha=alpha_attr, beta=beta_attr, detector=curb_detector,
-                              k_neighbours=k_neighbours, lane_m=lane_m, crs=crs)
-    u, v = gradient_vector_flow(attractor.data, mu=mu, iterations=gvf_iterations)
-    shift, half = initial_ribbon(attractor, samples, step_m=step_m, min_width_m=lane_m,
-                                 reach_m=6 * lane_m)
+    samples, _ = resample_line(line[:, :2], options.step_m)
+    if options.smooth_m > 0:
+        samples = ndimage.gaussian_filter1d(samples, options.smooth_m / options.step_m, axis=0,
+                                            mode="nearest")
+    attractor = attractor_map(points_xyz, line[:, :2], plane_normal, cell_m=options.cell_m,
+                              alpha=options.alpha_attr, beta=options.beta_attr,
+                              detector=options.curb_detector,
+                              k_neighbours=options.k_neighbours, lane_m=options.lane_m, crs=crs)
+    u, v = gradient_vector_flow(attractor.data, mu=options.mu, iterations=options.gvf_iterations)
+    shift, half = initial_ribbon(attractor, samples, step_m=options.step_m,
+                                 min_width_m=options.lane_m, reach_m=6 * options.lane_m)
     centre, half_width, converged = ribbon_snake(
         u, v, attractor.transform, samples, width0_m=2 * half, shift0_m=shift,
-        alpha=alpha, beta=beta, gamma=gamma, kappa=kappa, step_m=step_m,
-        max_iterations=max_iterations)
+        alpha=options.alpha, beta=options.beta, gamma=options.gamma, kappa=options.kappa,
+        step_m=options.step_m, max_iterations=options.max_iterations)
     z = _heights_along(line, centre)
     return Ribbon(int(road_id), np.column_stack([centre, z]), half_width, bool(converged),
                   attractor)
