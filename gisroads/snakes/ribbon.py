@@ -30,6 +30,8 @@ road width); the snake then refines the boundary sample by sample.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import numpy as np
 from affine import Affine
 from scipy import ndimage
@@ -183,12 +185,42 @@ def initial_ribbon(attractor: GeoRaster, line_xy, *, step_m: float = STEP_M,
     return centre[best], (offsets[left[best]] - offsets[right[best]]) / 2
 
 
-def ribbon_snake(gvf_u: np.ndarray, gvf_v: np.ndarray, transform: Affine, line_xy, *,
-                 width0_m, shift0_m=0.0, alpha: float = ALPHA_SNAKE, beta: float = BETA_SNAKE,
-                 gamma: float = GAMMA_SNAKE, kappa: float = KAPPA_SNAKE,
-                 step_m: float = STEP_M, max_iterations: int = MAX_ITERATIONS,
-                 tol_m: float = TOL_M, min_half_width_m: float = MIN_HALF_WIDTH_M
-                 ) -> tuple[np.ndarray, np.ndarray, bool]:
+@dataclass(frozen=True)
+class SnakeOptions:
+    """The options of :func:`ribbon_snake`: its internal energy, balloon force, step and
+    convergence (Table 1 of the paper).
+
+    Attributes
+    ----------
+    alpha, beta : float
+        Elasticity and rigidity of Eq. 6 (0.01, 100).
+    gamma : float
+        Step-size weight of the semi-implicit iteration (10).
+    kappa : float
+        Weight of the internal energy (1).
+    step_m : float
+        Sample spacing (metres; 1 m in the paper).
+    max_iterations : int
+        Iteration cap.
+    tol_m : float
+        Converged when no offset or width moves by more than this (metres) in an iteration.
+    min_half_width_m : float
+        Floor of the half width (metres).
+    """
+
+    alpha: float = ALPHA_SNAKE
+    beta: float = BETA_SNAKE
+    gamma: float = GAMMA_SNAKE
+    kappa: float = KAPPA_SNAKE
+    step_m: float = STEP_M
+    max_iterations: int = MAX_ITERATIONS
+    tol_m: float = TOL_M
+    min_half_width_m: float = MIN_HALF_WIDTH_M
+
+
+def ribbon_snake(gvf_u: np.ndarray, gvf_v: np.ndarray, transform: Affine, line_xy,
+                 options: SnakeOptions = SnakeOptions(), *, width0_m, shift0_m=0.0,
+                 **changes) -> tuple[np.ndarray, np.ndarray, bool]:
     """Fit a ribbon snake along a map line to a GVF field (Sec. 2.4).
 
     Parameters
@@ -204,20 +236,10 @@ def ribbon_snake(gvf_u: np.ndarray, gvf_v: np.ndarray, transform: Affine, line_x
         Initial full width (metres), one value or one per resampled sample.
     shift0_m : float or ndarray
         Initial offset of the centre to the left of the map line (metres).
-    alpha, beta : float
-        Elasticity and rigidity of Eq. 6 (0.01, 100).
-    gamma : float
-        Step-size weight of the semi-implicit iteration (10).
-    kappa : float
-        Weight of the internal energy (1).
-    step_m : float
-        Sample spacing (metres; 1 m in the paper).
-    max_iterations : int
-        Iteration cap.
-    tol_m : float
-        Converged when no offset or width moves by more than this (metres) in an iteration.
-    min_half_width_m : float
-        Floor of the half width (metres).
+    options : SnakeOptions
+        Energy weights, step and convergence (:class:`SnakeOptions`).
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
@@ -227,36 +249,38 @@ def ribbon_snake(gvf_u: np.ndarray, gvf_v: np.ndarray, transform: Affine, line_x
     converged : bool
         Whether the tolerance was met before the cap.
     """
+    options = replace(options, **changes)
     if gvf_u.shape != gvf_v.shape or gvf_u.ndim != 2:
         raise GisroadsError("gvf_u and gvf_v must be 2-D arrays of one shape")
-    if gamma <= 0 or step_m <= 0 or max_iterations < 1:
-        raise GisroadsError("gamma, step_m and max_iterations must be positive")
-    points, normals = resample_line(line_xy, step_m)
+    if options.gamma <= 0 or options.step_m <= 0 or options.max_iterations < 1:
+        raise GisroadsError("gamma, options.step_m and options.max_iterations must be positive")
+    points, normals = resample_line(line_xy, options.step_m)
     count = len(points)
     state = np.column_stack([np.broadcast_to(np.asarray(shift0_m, float), (count,)),
                              np.broadcast_to(np.asarray(width0_m, float) / 2, (count,))])
     if not np.isfinite(state).all() or (state[:, 1] <= 0).any():
         raise GisroadsError("width0_m must be positive and finite, shift0_m finite")
-    state[:, 1] = np.maximum(state[:, 1], min_half_width_m)
-    factor = _banded_factor(kappa * internal_matrix(count, alpha=alpha, beta=beta,
-                                                    step_m=step_m)
-                            + diags(np.full(count, gamma)), count)
+    state[:, 1] = np.maximum(state[:, 1], options.min_half_width_m)
+    internal = internal_matrix(count, alpha=options.alpha, beta=options.beta,
+                               step_m=options.step_m)
+    factor = _banded_factor(options.kappa * internal + diags(np.full(count, options.gamma)),
+                            count)
     pixel = abs(transform.a)
     # GVF per pixel along columns/rows -> per metre along map x/y
     fx, fy = np.sign(transform.a) * gvf_u / pixel, np.sign(transform.e) * gvf_v / pixel
     converged = False
-    for _ in range(max_iterations):
+    for _ in range(options.max_iterations):
         sides = np.concatenate([points + (state[:, :1] + state[:, 1:]) * normals,
                                 points + (state[:, :1] - state[:, 1:]) * normals])
         force = (sample_bilinear(fx, transform, sides) * np.tile(normals[:, 0], 2)
                  + sample_bilinear(fy, transform, sides) * np.tile(normals[:, 1], 2))
         left, right = force[:count], force[count:]
-        new = cho_solve_banded((factor, False),
-                               gamma * state + np.column_stack([left + right, left - right]))
-        new[:, 1] = np.maximum(new[:, 1], min_half_width_m)
+        new = cho_solve_banded((factor, False), options.gamma * state
+                               + np.column_stack([left + right, left - right]))
+        new[:, 1] = np.maximum(new[:, 1], options.min_half_width_m)
         moved = float(np.abs(new - state).max())
         state = new
-        if moved < tol_m:
+        if moved < options.tol_m:
             converged = True
             break
     return points + state[:, :1] * normals, state[:, 1].copy(), converged
