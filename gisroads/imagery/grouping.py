@@ -41,6 +41,8 @@ branches: they span road junctions.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import numpy as np
 import shapely
 from scipy import ndimage, sparse
@@ -318,11 +320,36 @@ def _merge_iteratively(state: _State, limits: dict, pixel_m: float, merge_fracti
                f"grouping: iteration {iteration + 1}, {len(ranked)} pairs merged")
 
 
-def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, ndvi=None,
-                   nir_band: int | None = None, merge_fraction: float = 0.1,
-                   max_iterations: int = 200, criteria: dict | None = None,
-                   split_branches: bool = True, min_branch_m: float = MIN_BRANCH_M,
-                   edge_magnitude=None, probability=None, progress=None) -> np.ndarray:
+@dataclass(frozen=True)
+class GroupingOptions:
+    """The options of :func:`group_segments`: how fast and how long segments are merged,
+    the criteria limits and the splitting of branching segments.
+
+    Attributes
+    ----------
+    merge_fraction : float
+        Share of the candidate pairs merged per iteration (paper: 10 %); at least one.
+    max_iterations : int
+        Iterations at most; the grouping usually stops earlier, when no pair is a candidate.
+    criteria : dict, optional
+        Overrides of :data:`CRITERIA` limits, ``{name: (poor, very_good)}``.
+    split_branches : bool
+        Run :func:`split_branching_segments` on the result.
+    min_branch_m : float
+        See :func:`split_branching_segments`.
+    """
+
+    merge_fraction: float = 0.1
+    max_iterations: int = 200
+    criteria: dict | None = None
+    split_branches: bool = True
+    min_branch_m: float = MIN_BRANCH_M
+
+
+def group_segments(labels, image: GeoRaster, options: GroupingOptions = GroupingOptions(), *,
+                   dsm: GeoRaster | None = None, ndvi=None, nir_band: int | None = None,
+                   edge_magnitude=None, probability=None, progress=None,
+                   **changes) -> np.ndarray:
     """Merge adjacent segments iteratively with the paper's criteria and fuzzy rules.
 
     Parameters
@@ -342,24 +369,18 @@ def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, nd
         ``nir_band`` instead, it is computed from the image.
     nir_band : int, optional
         1-based NIR band number: left out of the intensity edges and used for the NDVI.
-    merge_fraction : float
-        Share of the candidate pairs merged per iteration (paper: 10 %); at least one.
-    max_iterations : int
-        Iterations at most; the grouping usually stops earlier, when no pair is a candidate.
-    criteria : dict, optional
-        Overrides of :data:`CRITERIA` limits, ``{name: (poor, very_good)}``.
-    split_branches : bool
-        Run :func:`split_branching_segments` on the result.
-    min_branch_m : float
-        See :func:`split_branching_segments`.
     edge_magnitude : array_like, shape (rows, cols), optional
         Edge strength on the image grid; default:
         :func:`gisroads.imagery.segments.edge_strength`, as the segmentation uses.
     probability : array_like, shape (rows, cols), optional
         A learned road probability in [0, 1] on the image grid (beyond the paper; NaN: no
         value); enables the mean-probability-difference criterion.
+    options : GroupingOptions
+        Merging, criteria and branch splitting (:class:`GroupingOptions`).
     progress : callable, optional
         ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
@@ -372,16 +393,17 @@ def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, nd
         Labels of another shape than the image, non-integer labels, a ``merge_fraction``
         outside (0, 1], or an unknown criterion.
     """
+    options = replace(options, **changes)
     labels = np.asarray(labels)
     if labels.ndim != 2 or not np.issubdtype(labels.dtype, np.integer):
         raise GisroadsError(f"labels must be a 2-D integer array, got {labels.dtype} "
                             f"{labels.shape}")
     if labels.shape != image.shape:
         raise GisroadsError(f"labels {labels.shape} and image {image.shape} differ in shape")
-    if not 0 < merge_fraction <= 1:
-        raise GisroadsError(f"merge_fraction must lie in (0, 1], got {merge_fraction}")
+    if not 0 < options.merge_fraction <= 1:
+        raise GisroadsError(f"merge_fraction must lie in (0, 1], got {options.merge_fraction}")
     limits = dict(CRITERIA)
-    for name, value in (criteria or {}).items():
+    for name, value in (options.criteria or {}).items():
         if name not in CRITERIA:
             raise GisroadsError(f"unknown criterion {name!r}; known: {sorted(CRITERIA)}")
         limits[name] = tuple(value)
@@ -409,12 +431,13 @@ def group_segments(labels, image: GeoRaster, *, dsm: GeoRaster | None = None, nd
                                 "in shape")
         state = _State(compact, bands, edges,
                        None if dsm is None else resample_to(dsm, image), ndvi, probability, n)
-        _merge_iteratively(state, limits, pixel_m, merge_fraction, max_iterations, progress)
+        _merge_iteratively(state, limits, pixel_m, options.merge_fraction,
+                           options.max_iterations, progress)
         grouped = np.where(compact >= 0, state.roots()[np.maximum(compact, 0)], -1)
     grouped = (connected_regions(grouped, background=-1, connectivity=1) - 1).astype(np.int32)
-    if split_branches:
+    if options.split_branches:
         grouped = split_branching_segments(grouped, pixel_m=pixel_m,
-                                           min_branch_m=min_branch_m)
+                                           min_branch_m=options.min_branch_m)
     report(progress, 1.0, "grouping done")
     return grouped
 
