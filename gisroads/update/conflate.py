@@ -40,7 +40,7 @@ Computed columns replace database columns of the same name in the outputs.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import geopandas as gpd
 import numpy as np
@@ -359,27 +359,13 @@ def _proposed_update(database: gpd.GeoDataFrame, change: np.ndarray, moved_rows:
         geometry=update.geometry.name, crs=database.crs)
 
 
-def conflate(extracted: gpd.GeoDataFrame, database: gpd.GeoDataFrame, *,
-             id_field: str | None = None, width_field: str | None = None,
-             tolerance_m: float = 3.0, search_m: float = 15.0, max_angle_deg: float = 30.0,
-             width_tolerance_m: float = 2.0, stretch_m: float = 15.0, step_m: float = 2.0,
-             min_share: float = 0.5, min_new_m: float = 15.0, coverage=None,
-             progress: Progress = None) -> dict[str, gpd.GeoDataFrame]:
-    """Compare extracted centre lines with a road database: the change layers.
+@dataclass(frozen=True)
+class MatchOptions:
+    """The options of :func:`conflate`: how far and how alike an extracted line and a
+    database road must be to match, and the least change reported.
 
-    Parameters
+    Attributes
     ----------
-    extracted : GeoDataFrame
-        Extracted centre lines with a CRS (a gisroads ``road_centrelines`` layer: ``road_id``,
-        ``width_m``, ``score`` are used when present).
-    database : GeoDataFrame
-        Road lines (LineString or MultiLineString) in any CRS; reprojected to the
-        extraction's for matching, results written back in the database's CRS.
-    id_field : str, optional
-        Field holding the database's feature ids; by default the frame's index.
-    width_field : str, optional
-        Field holding the database's road widths (metres); without it widths are measured
-        but not compared.
     tolerance_m : float
         A seen road whose median offset from the extraction exceeds this is ``moved``
         (metres); samples closer than this to a compatible line always match.
@@ -400,10 +386,45 @@ def conflate(extracted: gpd.GeoDataFrame, database: gpd.GeoDataFrame, *,
         it the road is ``missing``.
     min_new_m : float
         Shortest unmatched run of an extracted line reported as ``new`` (metres).
+    """
+
+    tolerance_m: float = 3.0
+    search_m: float = 15.0
+    max_angle_deg: float = 30.0
+    width_tolerance_m: float = 2.0
+    stretch_m: float = 15.0
+    step_m: float = 2.0
+    min_share: float = 0.5
+    min_new_m: float = 15.0
+
+
+def conflate(extracted: gpd.GeoDataFrame, database: gpd.GeoDataFrame,
+             options: MatchOptions = MatchOptions(), *, id_field: str | None = None,
+             width_field: str | None = None, coverage=None, progress: Progress = None,
+             **changes) -> dict[str, gpd.GeoDataFrame]:
+    """Compare extracted centre lines with a road database: the change layers.
+
+    Parameters
+    ----------
+    extracted : GeoDataFrame
+        Extracted centre lines with a CRS (a gisroads ``road_centrelines`` layer: ``road_id``,
+        ``width_m``, ``score`` are used when present).
+    database : GeoDataFrame
+        Road lines (LineString or MultiLineString) in any CRS; reprojected to the
+        extraction's for matching, results written back in the database's CRS.
+    id_field : str, optional
+        Field holding the database's feature ids; by default the frame's index.
+    width_field : str, optional
+        Field holding the database's road widths (metres); without it widths are measured
+        but not compared.
     coverage : GeoDataFrame or GeoRaster, optional
         Where the data could show a road (polygons, or a raster whose non-zero cells are
         observable: e.g. the data footprint minus occlusion by trees and buildings).
+    options : MatchOptions
+        Matching distances, angles and least changes (:class:`MatchOptions`).
     progress : callable, optional
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
@@ -430,11 +451,12 @@ def conflate(extracted: gpd.GeoDataFrame, database: gpd.GeoDataFrame, *,
     >>> changes["proposed_update"].change.value_counts().sort_index().to_dict()
     {'missing': 1, 'moved': 1, 'new': 1, 'unchanged': 6}
     """
+    options = replace(options, **changes)
     if extracted.crs is None or database.crs is None:
         raise GisroadsError("both the extraction and the database need a CRS")
-    if not tolerance_m < search_m:
-        raise GisroadsError(f"the tolerance ({tolerance_m} m) must be below the search "
-                            f"distance ({search_m} m)")
+    if not options.tolerance_m < options.search_m:
+        raise GisroadsError(f"the tolerance ({options.tolerance_m} m) must be below the search "
+                            f"distance ({options.search_m} m)")
     ids = _feature_ids(database, id_field)
     if width_field is not None and width_field not in database.columns:
         raise GisroadsError(f"the database has no width field {width_field!r}")
@@ -444,28 +466,29 @@ def conflate(extracted: gpd.GeoDataFrame, database: gpd.GeoDataFrame, *,
     if len(db_lines) == 0:
         raise GisroadsError("the database holds no line geometry")
     ext_lines, ext_row = _line_parts(extracted, crs)
-    db, ext = _sample(db_lines, step_m), _sample(ext_lines, step_m)
+    db, ext = _sample(db_lines, options.step_m), _sample(ext_lines, options.step_m)
 
     report(progress, 0.2, "matching")
-    min_cos = np.cos(np.radians(max_angle_deg))
-    db_near = _nearest_compatible(db, ext_lines, search_m, min_cos)
-    ext_near = _nearest_compatible(ext, db_lines, search_m, min_cos)
+    min_cos = np.cos(np.radians(options.max_angle_deg))
+    db_near = _nearest_compatible(db, ext_lines, options.search_m, min_cos)
+    ext_near = _nearest_compatible(ext, db_lines, options.search_m, min_cos)
     db_feature = db_row[db.line]
     # the places already paired both ways are claimed: match again around them
     db_pair = np.where(_mutual(db_near, ext, ext_near, db_feature, db_row), db_near.line, -1)
     ext_pair = np.where(_mutual(ext_near, db, db_near, ext_row[ext.line], ext_row),
                         ext_near.line, -1)
-    db_near = _nearest_compatible(db, ext_lines, search_m, min_cos,
+    db_near = _nearest_compatible(db, ext_lines, options.search_m, min_cos,
                                   _Pairs(ext, ext_pair, db_row, db_feature))
-    ext_near = _nearest_compatible(ext, db_lines, search_m, min_cos,
+    ext_near = _nearest_compatible(ext, db_lines, options.search_m, min_cos,
                                    _Pairs(db, db_pair, ext_row, ext_row[ext.line]))
     db_seen = (_mutual(db_near, ext, ext_near, db_feature, db_row)
-               | (db_near.closest <= tolerance_m))
+               | (db_near.closest <= options.tolerance_m))
     ext_seen = (_mutual(ext_near, db, db_near, ext_row[ext.line], ext_row)
-                | (ext_near.closest <= tolerance_m))
+                | (ext_near.closest <= options.tolerance_m))
 
     report(progress, 0.5, "stretches")
-    n_stretches = np.maximum(np.rint(shapely.length(db_lines) / stretch_m), 1).astype(np.int64)
+    n_stretches = np.maximum(np.rint(shapely.length(db_lines) / options.stretch_m),
+                             1).astype(np.int64)
     stretch_length = shapely.length(db_lines) / n_stretches
     stretch = np.minimum((db.chainage // stretch_length[db.line]).astype(np.int64),
                          n_stretches[db.line] - 1)
@@ -492,10 +515,10 @@ def conflate(extracted: gpd.GeoDataFrame, database: gpd.GeoDataFrame, *,
         range(n_rows)).to_numpy()
     db_width = (pd.to_numeric(database[width_field], errors="coerce").to_numpy(float)
                 if width_field else np.full(n_rows, np.nan))
-    confirmed = share >= min_share
-    moved = confirmed & (offsets["median"].to_numpy() > tolerance_m)
+    confirmed = share >= options.min_share
+    moved = confirmed & (offsets["median"].to_numpy() > options.tolerance_m)
     width_diff = measured - db_width
-    width_changed = confirmed & (np.abs(width_diff) > width_tolerance_m)
+    width_changed = confirmed & (np.abs(width_diff) > options.width_tolerance_m)
     change = np.select([~confirmed, moved, width_changed], ["missing", "moved", "width"],
                        "unchanged").astype(object)
 
@@ -529,8 +552,8 @@ def conflate(extracted: gpd.GeoDataFrame, database: gpd.GeoDataFrame, *,
         database, run_row, back(runs.lines), db_crs)
 
     report(progress, 0.8, "new roads")
-    new = _new_layer(extracted, ext, ext_seen, ext_row, min_new_m, db_lines,
-                     ids.to_numpy()[db_row], tolerance_m + step_m)
+    new = _new_layer(extracted, ext, ext_seen, ext_row, options.min_new_m, db_lines,
+                     ids.to_numpy()[db_row], options.tolerance_m + options.step_m)
     new = new.set_geometry(gpd.GeoSeries(back(new.geometry.values), crs=db_crs), crs=db_crs)
 
     report(progress, 0.9, "layers")
