@@ -34,8 +34,8 @@ centre lines are, then one network stage (junctions, significance) over the whol
 """
 from __future__ import annotations
 
-import dataclasses
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -251,7 +251,7 @@ def road_probability(image: GeoRaster, model="default", *, adapt: bool = True,
     network = convnet_probability(image, progress=scaled(progress, 0.0, 0.5))
     trees = _trees_probability(image, model, adapt=adapt, context=None,
                                progress=scaled(progress, 0.5, 1.0))
-    return dataclasses.replace(trees, data=(LAYER_NETWORK_SHARE * network.data + (
+    return replace(trees, data=(LAYER_NETWORK_SHARE * network.data + (
         1 - LAYER_NETWORK_SHARE) * trees.data).astype(np.float32))
 
 
@@ -294,17 +294,53 @@ class ImageRoads(NamedTuple):
     and ``probability`` (the learned road probability as a :class:`GeoRaster`, or None)."""
 
 
-def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
-                        red_band: int | None = None, dsm: GeoRaster | None = None,
-                        n_segments: int | None = None, road_part_criteria: dict | None = None,
-                        gap_options: dict | None = None, weight_options: dict | None = None,
-                        network_options: dict | None = None,
-                        model="default", adapt: bool = True, context="default",
-                        probability: GeoRaster | None = None,
-                        method: str | None = None,
-                        probability_threshold: float | None = None,
-                        tile_px: int = TILE_PX, threads: int | None = 1,
-                        progress: Progress = None) -> ImageRoads:
+@dataclass(frozen=True)
+class ImageOptions:
+    """The options of :func:`extract_image_roads` beyond its inputs and model: the papers'
+    stages (segments, criteria, gaps, network, tiles) and the boosted trees' adaptation and
+    context model.
+
+    Attributes
+    ----------
+    n_segments : int, optional
+        NCut over-segmentation size; default
+        :func:`gisroads.imagery.segments.default_counts`.
+    road_part_criteria, gap_options, weight_options, network_options : dict, optional
+        Thresholds of :func:`gisroads.imagery.roadparts.filter_road_parts`,
+        :func:`gisroads.network.subgraph.gap_edges`,
+        :func:`gisroads.network.subgraph.edge_weights` and
+        :func:`gisroads.network.junctions.strings_to_network`.
+    adapt : bool
+        Adapt boosted trees to the image from its own confident pixels first
+        (scikit-learn).
+    context : "default", "none", str, Path or RoadModel
+        The context model that re-scores the probability on the probability path
+        (:func:`road_probability`, :func:`resolve_context`); the papers' stages take the
+        model's probability as it is (their thresholds were set on it).
+    tile_px : int
+        The papers' stages run tile by tile on an image with more than ``2 * tile_px`` rows
+        or columns (tiles of ``tile_px`` overlapping by :data:`TILE_OVERLAP_M`, road strings
+        stitched at the seams, then one network stage over the whole image; QA layers get
+        a ``tile`` column; ``n_segments`` then counts per tile). The probability path tiles
+        in its own network stage.
+    """
+
+    n_segments: int | None = None
+    road_part_criteria: dict | None = None
+    gap_options: dict | None = None
+    weight_options: dict | None = None
+    network_options: dict | None = None
+    adapt: bool = True
+    context: object = "default"
+    tile_px: int = TILE_PX
+
+
+def extract_image_roads(image: GeoRaster, options: ImageOptions = ImageOptions(), *,
+                        nir_band: int | None = None, red_band: int | None = None,
+                        dsm: GeoRaster | None = None, model="default",
+                        probability: GeoRaster | None = None, method: str | None = None,
+                        probability_threshold: float | None = None, threads: int | None = 1,
+                        progress: Progress = None, **changes) -> ImageRoads:
     """The road network of an aerial image (RGB, CIR or panchromatic; NIR and DSM optional).
 
     Parameters
@@ -317,29 +353,16 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
     dsm : GeoRaster, optional
         Surface heights (metres), any grid over the image: adds the height criterion of the
         grouping, the nDSM test of the road parts and buildings as gap context.
-    n_segments : int, optional
-        NCut over-segmentation size; default
-        :func:`gisroads.imagery.segments.default_counts`.
-    road_part_criteria, gap_options, weight_options, network_options : dict, optional
-        Thresholds of :func:`gisroads.imagery.roadparts.filter_road_parts`,
-        :func:`gisroads.network.subgraph.gap_edges`,
-        :func:`gisroads.network.subgraph.edge_weights` and
-        :func:`gisroads.network.junctions.strings_to_network`.
     model : ConvNet, RoadModel, str or Path, optional
         The learned road cue (beyond the papers): ``"default"`` (the bundled convolutional
         network), ``"boosted"`` (the bundled boosted trees), a model file written by
         ``gisroads train`` (``.onnx`` or ``.npz``), a model, or ``None`` / ``"none"`` for
         the papers' pipeline alone (:func:`resolve_model`).
-    adapt : bool
-        Adapt boosted trees to the image from its own confident pixels first
-        (scikit-learn).
-    context : "default", "none", str, Path or RoadModel
-        The context model that re-scores the probability on the probability path
-        (:func:`road_probability`, :func:`resolve_context`); the papers' stages take the
-        model's probability as it is (their thresholds were set on it).
     probability : GeoRaster, optional
         A road probability already computed on the image's grid (then ``model``,
         ``adapt`` and ``context`` are not used).
+    options : ImageOptions
+        The papers' stages and the boosted trees (:class:`ImageOptions`).
     method : str, optional
         ``"grote-rottensteiner"`` (the papers' stages, with the probability as road-part
         criterion and gap context when there is one) or ``"learned-probability"`` (the
@@ -350,16 +373,12 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
         See ``method``; by default the model's own (:func:`default_threshold`), for the
         convolutional network lowered on an image it is unsure of (:func:`image_threshold`;
         not for one fine-tuned on the image's road layer).
-    tile_px : int
-        The papers' stages run tile by tile on an image with more than ``2 * tile_px`` rows
-        or columns (tiles of ``tile_px`` overlapping by :data:`TILE_OVERLAP_M`, road strings
-        stitched at the seams, then one network stage over the whole image; QA layers get
-        a ``tile`` column; ``n_segments`` then counts per tile). The probability path tiles
-        in its own network stage.
     threads : int or None
         BLAS/OpenMP threads during the run (:func:`pinned_threads`).
     progress : callable, optional
         ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
@@ -393,14 +412,11 @@ def extract_image_roads(image: GeoRaster, *, nir_band: int | None = None,
     >>> scores.completeness > 0.6, scores.correctness > 0.8
     (True, True)
     """
+    options = replace(options, **changes)
     with pinned_threads(threads):
-        return _extract(image, nir_band=nir_band, red_band=red_band, dsm=dsm,
-                        n_segments=n_segments, road_part_criteria=road_part_criteria,
-                        gap_options=gap_options, weight_options=weight_options,
-                        network_options=network_options, model=model, adapt=adapt,
-                        context=context, probability=probability, method=method,
-                        probability_threshold=probability_threshold, tile_px=tile_px,
-                        progress=progress)
+        return _extract(image, options, nir_band=nir_band, red_band=red_band, dsm=dsm,
+                        model=model, probability=probability, method=method,
+                        probability_threshold=probability_threshold, progress=progress)
 
 
 def _convnet_of_tiles(model) -> bool:
@@ -441,9 +457,8 @@ class _StageClock:
         self.clock = now
 
 
-def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, gap_options,
-             weight_options, network_options, model, adapt, context, probability, method,
-             probability_threshold, tile_px, progress) -> ImageRoads:
+def _extract(image, options: ImageOptions, *, nir_band, red_band, dsm, model, probability,
+             method, probability_threshold, progress) -> ImageRoads:
     if image.crs is not None and not image.crs.is_projected:
         raise GisroadsError("the image must be in a projected CRS in metres (reproject it, "
                             "e.g. to its UTM zone)")
@@ -459,11 +474,11 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
         raise GisroadsError(f"method must be {METHOD!r} or {PROBABILITY_METHOD!r}, "
                             f"not {method!r}")
     # the papers' stages take the first-stage probability: their thresholds were set on it
-    context = (resolve_context(context, model)
+    context = (resolve_context(options.context, model)
                if probability is None and model is not None and method == PROBABILITY_METHOD
                else None)
     if probability is None and model is not None:
-        probability = road_probability(image, model, adapt=adapt, context=context,
+        probability = road_probability(image, model, adapt=options.adapt, context=context,
                                        progress=scaled(progress, 0.0, 0.15))
         lap("probability")
     elif probability is not None and probability.shape != image.shape:
@@ -490,9 +505,10 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
             "roads": len(network.centrelines)})
     base = 0.15 if "probability" in timings else 0.0
     progress = scaled(progress, base, 1.0)
-    stages = dict(nir_band=nir_band, red_band=red_band, dsm=dsm, n_segments=n_segments,
-                  road_part_criteria=road_part_criteria, gap_options=gap_options,
-                  weight_options=weight_options)
+    stages = dict(nir_band=nir_band, red_band=red_band, dsm=dsm, n_segments=options.n_segments,
+                  road_part_criteria=options.road_part_criteria,
+                  gap_options=options.gap_options, weight_options=options.weight_options)
+    tile_px = options.tile_px
     if max(image.shape) > 2 * tile_px:
         strings, qa, record, counts = _tiled_road_strings(
             image, probability, tile_px=tile_px, timings=timings,
@@ -504,7 +520,7 @@ def _extract(image, *, nir_band, red_band, dsm, n_segments, road_part_criteria, 
     lap.restart()  # the tiled stages kept their own times
     network, connections = strings_to_network(strings, extent=image.bounds, crs=image.crs,
                                               method=METHOD, progress=scaled(progress, 0.85, 1.0),
-                                              **(network_options or {}))
+                                              **(options.network_options or {}))
     lap("network")
     network.centrelines["cues"] = record["cues"]
     network.qa = {**qa, "junction_connections": connections}
@@ -527,7 +543,7 @@ def _road_strings(image: GeoRaster, probability: GeoRaster | None, *, nir_band, 
     report(progress, 0.0, "image cues")
     cues = image_cues(image, nir_band=nir_band, red_band=red_band, dsm=dsm)
     if probability is not None:
-        cues = dataclasses.replace(cues, probability=np.asarray(probability.data, np.float32))
+        cues = replace(cues, probability=np.asarray(probability.data, np.float32))
     # one local-energy pass for the three stages that weigh edges
     edges = edge_strength(image, nir_band=nir_band, bands=cues.bands)
     lap("cues")
