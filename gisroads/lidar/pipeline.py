@@ -617,14 +617,44 @@ def service_lines(lines: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
     }, geometry=frame.geometry.values, crs=lines.crs)
 
 
-def extract_roads(path, *, cue: str = "evidence", tile_m: float = TILE_M,
-                  overlap_m: float = OVERLAP_M, cell_m: float | None = None,
-                  widths_m=DEFAULT_WIDTHS_M, lengths_m=DEFAULT_LENGTHS_M,
-                  n_segments: int = N_SEGMENTS, t_planar: float = 0.01, t_vert: float = 0.98,
-                  threshold: float = EVIDENCE_THRESHOLD, network_options: dict | None = None,
-                  min_points: int = 1000, workers: int = 1, scheduler: str | None = None,
-                  work_dir=None, tile_maps: bool = True, lazy: bool = False, model=None,
-                  progress: Progress = None) -> LidarRoads | TiledRoads:
+@dataclass(frozen=True)
+class LidarOptions:
+    """The options of :func:`extract_roads`: the tiles, the image cell, the evidence cue's
+    threshold and network stage, and the intensity cue's stages (``widths_m``,
+    ``lengths_m``, ``n_segments``, ``t_planar``, ``t_vert``: see :func:`extract_tile`).
+
+    Attributes
+    ----------
+    tile_m, overlap_m : float
+        Tile side and overlap with each neighbour, metres (paper: 300 m and 100 m).
+    cell_m : float, optional
+        Image cell, metres; by default :func:`auto_cell_m` of the cloud.
+    threshold : float
+        ``cue="evidence"``: likelihood at which a cell is road (a model brings its own).
+    network_options : dict, optional
+        ``cue="evidence"``: keyword arguments of
+        :func:`gisroads.network.rasters.raster_to_network`.
+    min_points : int
+        Tiles with fewer points are skipped.
+    """
+
+    tile_m: float = TILE_M
+    overlap_m: float = OVERLAP_M
+    cell_m: float | None = None
+    widths_m: tuple = DEFAULT_WIDTHS_M
+    lengths_m: tuple = DEFAULT_LENGTHS_M
+    n_segments: int = N_SEGMENTS
+    t_planar: float = 0.01
+    t_vert: float = 0.98
+    threshold: float = EVIDENCE_THRESHOLD
+    network_options: dict | None = None
+    min_points: int = 1000
+
+
+def extract_roads(path, options: LidarOptions = LidarOptions(), *, cue: str = "evidence",
+                  workers: int = 1, scheduler: str | None = None, work_dir=None,
+                  tile_maps: bool = True, lazy: bool = False, model=None,
+                  progress: Progress = None, **changes) -> LidarRoads | TiledRoads:
     """The road network of a point cloud, tile by tile.
 
     The input is read once: its points are bucketed into the tile grid on disk
@@ -641,17 +671,6 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = TILE_M,
         roughness, slope, returns, classification, kerbs, whichever the file has) through
         the network stage (module docstring); ``intensity``: Zhu & Mordohai's Algorithm 1
         alone.
-    tile_m, overlap_m : float
-        Tile side and overlap with each neighbour, metres (paper: 300 m and 100 m).
-    cell_m : float, optional
-        Image cell, metres; by default :func:`auto_cell_m` of the cloud.
-    threshold : float
-        ``cue="evidence"``: likelihood at which a cell is road (a model brings its own).
-    network_options : dict, optional
-        ``cue="evidence"``: keyword arguments of
-        :func:`gisroads.network.rasters.raster_to_network`.
-    min_points : int
-        Tiles with fewer points are skipped.
     workers : int
         Tiles run as tasks on a local Dask cluster of this many single-threaded worker
         processes; 1 runs them in this process, without Dask.
@@ -676,7 +695,10 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = TILE_M,
         ``cue="evidence"``: an evidence model learned from a road layer of the area
         (:func:`train_evidence_model`; beyond the paper): its probability replaces the
         rule's likelihood.
-    Other parameters (``cue="intensity"``): see :func:`extract_tile`.
+    options : LidarOptions
+        Tiles, cell and the cues' options (:class:`LidarOptions`).
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
@@ -720,6 +742,7 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = TILE_M,
     >>> buffer_metrics(evidence.network.centrelines, scene.truth.centrelines).completeness > 0.9
     True
     """
+    options = replace(options, **changes)
     if cue not in CUES:
         raise GisroadsError(f"cue must be one of {CUES}, not {cue!r}")
     if model is not None:
@@ -729,24 +752,27 @@ def extract_roads(path, *, cue: str = "evidence", tile_m: float = TILE_M,
     with shared_workers():  # one cluster for the reading pass and the tiles
         parallel = dict(workers=workers, scheduler=scheduler, work_dir=work_dir)
         if cue == "evidence":
-            roads = _evidence_roads(path, threshold=threshold, network_options=network_options,
-                                    model=model, progress=progress, tile_m=tile_m,
-                                    overlap_m=overlap_m, cell_m=cell_m, min_points=min_points,
-                                    **parallel)
+            roads = _evidence_roads(path, threshold=options.threshold,
+                                    network_options=options.network_options, model=model,
+                                    progress=progress, tile_m=options.tile_m,
+                                    overlap_m=options.overlap_m, cell_m=options.cell_m,
+                                    min_points=options.min_points, **parallel)
             tiled = TiledRoads(roads.network, cue, tiles=[], files=[], levels=0, imaged=False,
                                evidence=roads.evidence,
                                ground_intensity=roads.ground_intensity, cues=roads.cues,
                                run=roads.run)
         else:
-            store = open_store(path, work_dir, tile_m=tile_m, overlap_m=overlap_m,
-                               workers=workers, scheduler=scheduler,
-                               progress=scaled(progress, 0.0, 0.1))
+            store = open_store(path, work_dir, tile_m=options.tile_m,
+                               overlap_m=options.overlap_m, workers=workers,
+                               scheduler=scheduler, progress=scaled(progress, 0.0, 0.1))
             try:
-                options = dict(widths_m=tuple(widths_m), lengths_m=tuple(lengths_m),
-                               n_segments=n_segments, t_planar=t_planar, t_vert=t_vert)
-                tiled = _intensity_roads(store, cell_m=cell_m, min_points=min_points,
-                                         options=options, progress=scaled(progress, 0.1, 0.95),
-                                         **parallel)
+                stages = dict(widths_m=tuple(options.widths_m),
+                              lengths_m=tuple(options.lengths_m),
+                              n_segments=options.n_segments, t_planar=options.t_planar,
+                              t_vert=options.t_vert)
+                tiled = _intensity_roads(store, cell_m=options.cell_m,
+                                         min_points=options.min_points, options=stages,
+                                         progress=scaled(progress, 0.1, 0.95), **parallel)
             except BaseException:
                 if work_dir is None:
                     store.remove()
