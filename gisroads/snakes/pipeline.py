@@ -13,7 +13,7 @@ converted together, and the road polygons carry their ``level``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from functools import partial
 
 import geopandas as gpd
@@ -468,7 +468,7 @@ class _PatchJob:
 
     store: object
     crs: object
-    fit_options: dict
+    ribbon: RibbonOptions
     tag: bool
     """Return the file indices of the patch's points inside its ribbon (tagging)."""
     attractor: bool
@@ -519,7 +519,7 @@ def fit_patch(job: _PatchJob, road):
     if patch is not None and len(patch.points) >= MIN_NEIGHBOURS:
         ribbon = fit_ribbon(patch.points, patch.samples_xyz,
                             np.asarray(patch.plane_normal)[np.asarray(patch.sample_index)],
-                            road_id=patch.road_id, crs=job.crs, **job.fit_options)
+                            job.ribbon, road_id=patch.road_id, crs=job.crs)
         indices = road_point_indices([patch], [ribbon]) if job.tag else None
         if not job.attractor:
             ribbon.attractor = None
@@ -538,11 +538,11 @@ def _code_fingerprint() -> str:
                             (np, scipy, shapely))
 
 
-def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector: str = "exp",
-                       cell_m: float = 0.5, snap_m: float | None = None, tagged_las=None,
-                       clearance_m: float = CLEARANCE_M, workers: int = 1,
+def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame,
+                       ribbon: RibbonOptions = RibbonOptions(), *, snap_m: float | None = None,
+                       tagged_las=None, clearance_m: float = CLEARANCE_M, workers: int = 1,
                        scheduler: str | None = None, work_dir=None, attractor: bool = True,
-                       progress: Progress = None, **fit_options) -> MapGuidedRoads:
+                       progress: Progress = None, **changes) -> MapGuidedRoads:
     """Roads of a LAS/LAZ file along an approximate road map (Boyko & Funkhouser, 2011).
 
     The file is decoded once into a tile store of :data:`PATCH_CELL_M` cells
@@ -556,10 +556,9 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
     cloud_path : str or Path
     map_lines : GeoDataFrame
         Road map lines in any CRS (reprojected to the cloud's metre CRS).
-    curb_detector : {"exp", "step", "none"}
-        f_nExp (the paper's best), f_nStep or f_n.
-    cell_m : float
-        Attractor grid cell (metres).
+    ribbon : RibbonOptions
+        The attractor, GVF and snake of every road patch (:func:`fit_ribbon`; the paper's
+        Table 1, its best curb detector f_nExp).
     snap_m : float, optional
         Snapping tolerance of the map's intersections (metres; the registration's default).
     tagged_las : str or Path, optional
@@ -578,8 +577,8 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
     attractor : bool
         Return the attractor mosaic (False: the patches' maps are dropped as they finish).
     progress : callable, optional
-    fit_options
-        Passed to :func:`fit_ribbon`.
+    **changes
+        Fields of ``ribbon`` to change for this call, e.g. ``curb_detector="step"``.
 
     Returns
     -------
@@ -611,6 +610,7 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
 
     from ..tiling.tilestore import open_store
 
+    ribbon = replace(ribbon, **changes)
     lines, working = _map_in_cloud_crs(cloud_path, map_lines)
     with shared_workers():  # one cluster for the reading pass and the patches
         store = open_store(cloud_path, work_dir, tile_m=PATCH_CELL_M, overlap_m=0.0,
@@ -620,13 +620,12 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame, *, curb_detector
             registered = _register(store, cloud_path, lines, snap_m,
                                    progress=scaled(progress, 0.1, 0.3))
             crs = working if working is not None else lines.crs
-            options = dict(curb_detector=curb_detector, cell_m=cell_m, **fit_options)
             results = None
             if work_dir is not None:
-                key = digest([store.key, options, _code_fingerprint()])
+                key = digest([store.key, asdict(ribbon), _code_fingerprint()])
                 results = Path(work_dir) / f"patches-{key}"
                 results.mkdir(parents=True, exist_ok=True)
-            job = _PatchJob(store, crs, options, tagged_las is not None, attractor, results)
+            job = _PatchJob(store, crs, ribbon, tagged_las is not None, attractor, results)
             outcomes = [o for o in run_tasks(partial(fit_patch, job), one_road_maps(registered),
                                              workers=workers, scheduler=scheduler,
                                              progress=scaled(progress, 0.3, 0.8),
