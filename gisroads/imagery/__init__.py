@@ -12,14 +12,17 @@ from typing import TYPE_CHECKING
 
 from .. import _lazy_exports
 
-__all__ = ["ImageRoads", "baseline_roads", "extract_image_roads", "road_colour_mask",
-           "road_probability"]
+__all__ = [
+    "ImageOptions", "ImageRoads", "baseline_roads", "extract_image_roads", "road_colour_mask",
+    "road_probability",
+]
 
 __getattr__, __dir__ = _lazy_exports(__name__, {
-    **dict.fromkeys(["ImageRoads", "extract_image_roads", "road_probability"], ".pipeline"),
+    **dict.fromkeys(["ImageOptions", "ImageRoads", "extract_image_roads", "road_probability"],
+                    ".pipeline"),
     **dict.fromkeys(["baseline_roads", "road_colour_mask"], ".baseline"),
 })
 
 if TYPE_CHECKING:
     from .baseline import baseline_roads, road_colour_mask
-    from .pipeline import ImageRoads, extract_image_roads, road_probability
+    from .pipeline import ImageOptions, ImageRoads, extract_image_roads, road_probability

@@ -16,15 +16,15 @@ from typing import TYPE_CHECKING
 from .. import _lazy_exports
 
 __all__ = [
-    "EvidenceMosaic", "GroundPlanes", "IntensityImages", "LidarRoads", "TiledRoads",
-    "baseline_roads", "city_blocks", "evidence_raster", "extract_roads", "extract_tile",
-    "ground_planes", "image_grid", "intensity_images", "road_evidence", "road_likelihood",
-    "tag_road_points", "write_intensity_images",
+    "EvidenceMosaic", "GroundPlanes", "IntensityImages", "LidarOptions", "LidarRoads",
+    "TiledRoads", "baseline_roads", "city_blocks", "evidence_raster", "extract_roads",
+    "extract_tile", "ground_planes", "image_grid", "intensity_images", "road_evidence",
+    "road_likelihood", "tag_road_points", "write_intensity_images",
 ]
 
 __getattr__, __dir__ = _lazy_exports(__name__, {
-    **dict.fromkeys(["EvidenceMosaic", "LidarRoads", "TiledRoads", "evidence_raster",
-                     "extract_roads", "extract_tile"], ".pipeline"),
+    **dict.fromkeys(["EvidenceMosaic", "LidarOptions", "LidarRoads", "TiledRoads",
+                     "evidence_raster", "extract_roads", "extract_tile"], ".pipeline"),
     **dict.fromkeys(["city_blocks", "road_likelihood"], ".blocks"),
     **dict.fromkeys(["GroundPlanes", "ground_planes"], ".ground"),
     **dict.fromkeys(["IntensityImages", "image_grid", "intensity_images",
@@ -40,6 +40,6 @@ if TYPE_CHECKING:
     from .evidence import road_evidence
     from .ground import GroundPlanes, ground_planes
     from .intensity import IntensityImages, image_grid, intensity_images, write_intensity_images
-    from .pipeline import (EvidenceMosaic, LidarRoads, TiledRoads, evidence_raster,
-                           extract_roads, extract_tile)
+    from .pipeline import (EvidenceMosaic, LidarOptions, LidarRoads, TiledRoads,
+                           evidence_raster, extract_roads, extract_tile)
     from .tagging import tag_road_points

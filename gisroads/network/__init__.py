@@ -23,18 +23,21 @@ from typing import TYPE_CHECKING
 
 from .. import _lazy_exports
 
-__all__ = ["link_gaps", "link_road_parts", "parts_to_network", "raster_to_network",
-           "road_mask", "road_probability", "skeleton_parts", "strings_to_network"]
+__all__ = [
+    "NetworkOptions", "PartOptions", "link_gaps", "link_road_parts", "parts_to_network",
+    "raster_to_network", "road_mask", "road_probability", "skeleton_parts",
+    "strings_to_network",
+]
 
 __getattr__, __dir__ = _lazy_exports(__name__, {
-    **dict.fromkeys(["link_gaps", "parts_to_network", "raster_to_network", "road_mask",
-                     "road_probability", "skeleton_parts"], ".rasters"),
+    **dict.fromkeys(["PartOptions", "link_gaps", "parts_to_network", "raster_to_network",
+                     "road_mask", "road_probability", "skeleton_parts"], ".rasters"),
     "link_road_parts": ".subgraph",
-    "strings_to_network": ".junctions",
+    **dict.fromkeys(["NetworkOptions", "strings_to_network"], ".junctions"),
 })
 
 if TYPE_CHECKING:
-    from .junctions import strings_to_network
-    from .rasters import (link_gaps, parts_to_network, raster_to_network, road_mask,
-                          road_probability, skeleton_parts)
+    from .junctions import NetworkOptions, strings_to_network
+    from .rasters import (PartOptions, link_gaps, parts_to_network, raster_to_network,
+                          road_mask, road_probability, skeleton_parts)
     from .subgraph import link_road_parts

@@ -13,16 +13,18 @@ from typing import TYPE_CHECKING
 
 from .. import _lazy_exports
 
-__all__ = ["MapGuidedRoads", "Ribbon", "curb_attractor", "extract_map_guided", "fit_ribbon",
-           "map_patches", "register_map"]
+__all__ = [
+    "MapGuidedRoads", "Ribbon", "RibbonOptions", "curb_attractor", "extract_map_guided",
+    "fit_ribbon", "map_patches", "register_map",
+]
 
 __getattr__, __dir__ = _lazy_exports(__name__, {
-    **dict.fromkeys(["MapGuidedRoads", "Ribbon", "curb_attractor", "extract_map_guided",
-                     "fit_ribbon", "map_patches"], ".pipeline"),
+    **dict.fromkeys(["MapGuidedRoads", "Ribbon", "RibbonOptions", "curb_attractor",
+                     "extract_map_guided", "fit_ribbon", "map_patches"], ".pipeline"),
     "register_map": ".registration",
 })
 
 if TYPE_CHECKING:
-    from .pipeline import (MapGuidedRoads, Ribbon, curb_attractor, extract_map_guided,
-                           fit_ribbon, map_patches)
+    from .pipeline import (MapGuidedRoads, Ribbon, RibbonOptions, curb_attractor,
+                           extract_map_guided, fit_ribbon, map_patches)
     from .registration import register_map

@@ -8,8 +8,9 @@ benchmark with known changes (fakes kept clear of :func:`truth_pavement`).
 """
 from .benchmark import (FUSA_UNLABELLED_PAVEMENT, EditedDatabase, edit_database,
                         pooled_scores, score_changes, truth_pavement)
-from .conflate import CHANGES, LAYERS, conflate
+from .conflate import CHANGES, LAYERS, MatchOptions, conflate
 from .sources import read_database
 
-__all__ = ["CHANGES", "FUSA_UNLABELLED_PAVEMENT", "LAYERS", "EditedDatabase", "conflate",
-           "edit_database", "pooled_scores", "read_database", "score_changes", "truth_pavement"]
+__all__ = ["CHANGES", "FUSA_UNLABELLED_PAVEMENT", "LAYERS", "EditedDatabase", "MatchOptions",
+           "conflate", "edit_database", "pooled_scores", "read_database", "score_changes",
+           "truth_pavement"]
