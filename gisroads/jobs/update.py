@@ -1,6 +1,7 @@
 """The road database update job: an extraction compared with a road database."""
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import geopandas as gpd
@@ -12,8 +13,8 @@ from ..io.quicklook import write_quicklook
 from ..io.raster import read_raster
 from ..io.vector import write_geopackage
 from ..progress import Progress, report, scaled
-from ..update import CHANGES, LAYERS, conflate, read_database
-from .common import _layer, _named_layer, stage_default
+from ..update import CHANGES, LAYERS, MatchOptions, conflate, read_database
+from .common import _layer, _named_layer
 
 
 def _coverage(path) -> GeoRaster | gpd.GeoDataFrame:
@@ -36,13 +37,10 @@ def _database(source, layer: str | None, fid_field: str | None) -> gpd.GeoDataFr
         columns=fid_field)
 
 
-def update_job(extracted, database, out_path, *, layer: str | None = None,
-               id_field: str | None = None, fid_field: str | None = None,
-               width_field: str | None = None,
-               tolerance_m: float = stage_default(conflate, "tolerance_m"),
-               search_m: float = stage_default(conflate, "search_m"),
-               width_tolerance_m: float = stage_default(conflate, "width_tolerance_m"),
-               coverage=None, quicklook=None, progress: Progress = None) -> dict:
+def update_job(extracted, database, out_path, options: MatchOptions = MatchOptions(), *,
+               layer: str | None = None, id_field: str | None = None,
+               fid_field: str | None = None, width_field: str | None = None, coverage=None,
+               quicklook=None, progress: Progress = None, **changes) -> dict:
     """Compare an extraction with a road database; write the change layers.
 
     Parameters
@@ -64,8 +62,9 @@ def update_job(extracted, database, out_path, *, layer: str | None = None,
         of a layer whose ids its file cannot keep, e.g. a PostGIS table or a selection
         written to a temporary GeoPackage); it is not one of the database's fields in the
         outputs.
-    tolerance_m, search_m, width_tolerance_m : float
-        See :func:`gisroads.update.conflate` (metres).
+    options : MatchOptions
+        How lines match (:func:`gisroads.update.conflate`); ``**changes`` change its fields
+        for this call, e.g. ``tolerance_m=4.0``.
     coverage : str or Path, optional
         Where the data could show a road: a polygon file, or a raster whose non-zero cells
         are observable.
@@ -80,22 +79,21 @@ def update_job(extracted, database, out_path, *, layer: str | None = None,
     report(progress, 0.0, "reading")
     lines = _layer(extracted, "road_centrelines")
     roads = _database(database, layer, fid_field)
-    changes = conflate(lines, roads, id_field=id_field, width_field=width_field,
-                       tolerance_m=tolerance_m, search_m=search_m,
-                       width_tolerance_m=width_tolerance_m,
-                       coverage=_coverage(coverage) if coverage is not None else None,
-                       progress=scaled(progress, 0.05, 0.9))
+    found = conflate(lines, roads, replace(options, **changes), id_field=id_field,
+                     width_field=width_field,
+                     coverage=_coverage(coverage) if coverage is not None else None,
+                     progress=scaled(progress, 0.05, 0.9))
     report(progress, 0.9, "writing")
-    changes = {name: frame.set_geometry(gpd.GeoSeries(shapely.force_2d(frame.geometry.values),
-                                                      index=frame.index, crs=frame.crs))
-               for name, frame in changes.items()}
-    write_geopackage(out_path, changes)
-    counted = changes["proposed_update"]["change"].value_counts()
-    result = {"gpkg": Path(out_path), **{name: len(changes[name]) for name in LAYERS},
+    found = {name: frame.set_geometry(gpd.GeoSeries(shapely.force_2d(frame.geometry.values),
+                                                    index=frame.index, crs=frame.crs))
+             for name, frame in found.items()}
+    write_geopackage(out_path, found)
+    counted = found["proposed_update"]["change"].value_counts()
+    result = {"gpkg": Path(out_path), **{name: len(found[name]) for name in LAYERS},
               "changes": {name: int(counted.get(name, 0)) for name in CHANGES}}
     if quicklook is not None:
         report(progress, 0.95, "drawing the quick-look")
-        result["quicklook"] = _changes_quicklook(quicklook, roads, lines, changes,
+        result["quicklook"] = _changes_quicklook(quicklook, roads, lines, found,
                                                  title=f"{Path(str(extracted)).name} against "
                                                        "the database")
     report(progress, 1.0, "done")
