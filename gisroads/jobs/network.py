@@ -9,7 +9,7 @@ from ..errors import GisroadsError
 from ..imagery.cues import context_rasters, image_cues, normalised_dsm
 from ..io.raster import read_raster
 from ..io.vector import write_geopackage
-from ..network.junctions import road_strings_from_lines, strings_to_network
+from ..network.junctions import NetworkOptions, road_strings_from_lines, strings_to_network
 from ..network.rasters import THRESHOLD, raster_to_network
 from ..network.subgraph import edge_weights, gap_edges, link_road_parts, road_strings
 from ..progress import Progress, report, scaled
@@ -111,37 +111,25 @@ def _gap_context(crs, image_path, dsm_path, nir_band, red_band) -> dict:
     return {"transform": image.transform, **context_rasters(cues)}
 
 
-def junctions_job(lines, out_path, *, extent=None,
-                  width_m: float = stage_default(road_strings_from_lines, "width_m"),
+def junctions_job(lines, out_path, options: NetworkOptions = NetworkOptions(), *,
+                  extent=None, width_m: float = stage_default(road_strings_from_lines, "width_m"),
                   quality: float = stage_default(road_strings_from_lines, "quality"),
-                  tolerance_m: float = stage_default(strings_to_network, "tolerance_m"),
-                  min_search_radius_m: float = stage_default(strings_to_network,
-                                                             "min_search_radius_m"),
-                  max_search_radius_m: float = stage_default(strings_to_network,
-                                                             "max_search_radius_m"),
-                  collinear_deg: float = stage_default(strings_to_network, "collinear_deg"),
-                  overlap_share: float = stage_default(strings_to_network, "overlap_share"),
-                  min_total_length_m: float = stage_default(strings_to_network,
-                                                            "min_total_length_m"),
-                  border_m: float = stage_default(strings_to_network, "border_m"),
-                  progress: Progress = None) -> dict:
+                  progress: Progress = None, **changes) -> dict:
     """Junction construction and network generation (Grote et al. 2012, Sec. 2.3) of any
     line layer (:func:`gisroads.network.junctions.strings_to_network`).
 
     ``lines``: a line file (or ``path|layername=``), e.g. :func:`linking_job`'s road
     strings or lines drawn by hand; ``width_m`` and ``quality`` fill rows without them.
     ``extent``: ``(xmin, ymin, xmax, ymax)`` of the image the strings come from, in their
-    CRS (components leaving it are kept however short). Writes ``out_path``: the network's
-    layers and ``junction_connections``.
+    CRS (components leaving it are kept however short). ``options``: of the network stage;
+    ``**changes`` change its fields for this call. Writes ``out_path``: the network's layers
+    and ``junction_connections``.
     """
     source, lines = lines, _layer(lines, "road_strings")
     strings = road_strings_from_lines(lines, width_m=width_m, quality=quality)
     network, connections = strings_to_network(
-        strings, extent=None if extent is None else tuple(extent), crs=lines.crs,
-        tolerance_m=tolerance_m, min_search_radius_m=min_search_radius_m,
-        max_search_radius_m=max_search_radius_m, collinear_deg=collinear_deg,
-        overlap_share=overlap_share, min_total_length_m=min_total_length_m,
-        border_m=border_m, progress=progress)
+        strings, options, extent=None if extent is None else tuple(extent), crs=lines.crs,
+        progress=progress, **changes)
     write_geopackage(out_path, {**network.layers(), "junction_connections": connections})
     _warn_if_no_road(network, source)
     kept = int((connections["verified"] & connections["significant"]).sum())
