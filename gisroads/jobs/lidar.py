@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import warnings
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +19,7 @@ from ..io.quicklook import write_quicklook
 from ..io.raster import read_raster, write_geotiff
 from ..io.vector import (GeoPackageWriter, atomic_path, list_layers, read_layer,
                          write_geopackage)
-from ..lidar.blocks import (MAX_EDGE_M, MIN_BLOCK_AREA_M2, ROAD_FRACTION, SAMPLE_SPACING_M,
-                            city_blocks, road_likelihood, thin_points)
+from ..lidar.blocks import BlockOptions, city_blocks, road_likelihood, thin_points
 from ..lidar.ground import ground_planes
 from ..lidar.hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, T_BD, T_INT,
                                 likelihood_maps, road_hypotheses)
@@ -444,13 +444,9 @@ def tag_job(cloud_path, polygons_path, out_path, *, heights_path=None,
     return {"tagged_las": Path(out_path), "tagged_points": tagged}
 
 
-def blocks_job(likelihood_path, out_path, *, points_path=None, quicklook=None,
-               sample_spacing_m: float = SAMPLE_SPACING_M, max_edge_m: float = MAX_EDGE_M,
-               n_blocks: int | None = None, l_max: float = L_MAX,
-               probability: bool | None = None, road_fraction: float = ROAD_FRACTION,
-               min_block_area_m2: float = MIN_BLOCK_AREA_M2,
-               seed: int = stage_default(city_blocks, "seed"),
-               progress: Progress = None) -> dict:
+def blocks_job(likelihood_path, out_path, options: BlockOptions = BlockOptions(), *,
+               points_path=None, quicklook=None, progress: Progress = None,
+               **changes) -> dict:
     """City blocks (Zhu & Mordohai, section 5) of a road-likelihood raster into a GeoPackage.
 
     ``likelihood_path``: a ``*_likelihood_level_*.tif`` of ``gisroads lidar --rasters`` or
@@ -458,17 +454,15 @@ def blocks_job(likelihood_path, out_path, *, points_path=None, quicklook=None,
     ``points_path``: a LAS/LAZ whose ground points (class 2; every point when the file has
     none) are the graph's nodes, streamed and thinned chunk by chunk, reprojected to the
     raster's CRS. Writes the ``city_blocks`` layer to ``out_path`` and optionally a
-    ``quicklook`` PNG of the blocks over the likelihood. The parameters from
-    ``sample_spacing_m`` on are those of :func:`gisroads.lidar.blocks.city_blocks`.
+    ``quicklook`` PNG of the blocks over the likelihood. ``options`` (and ``**changes`` to
+    its fields) are those of :func:`gisroads.lidar.blocks.city_blocks`.
     """
+    options = replace(options, **changes)
     raster = read_raster(likelihood_path)
     points = None
     if points_path is not None:
-        points = _ground_points_xy(points_path, raster.crs, sample_spacing_m)
-    blocks = city_blocks(raster, points_xy=points, sample_spacing_m=sample_spacing_m,
-                         max_edge_m=max_edge_m, n_blocks=n_blocks, l_max=l_max,
-                         probability=probability, road_fraction=road_fraction,
-                         min_block_area_m2=min_block_area_m2, seed=seed,
+        points = _ground_points_xy(points_path, raster.crs, options.sample_spacing_m)
+    blocks = city_blocks(raster, options, points_xy=points,
                          progress=scaled(progress, 0.0, 0.9))
     if len(blocks) == 0:
         raise GisroadsError(f"{likelihood_path}: no city block of the minimum area was "
@@ -478,7 +472,7 @@ def blocks_job(likelihood_path, out_path, *, points_path=None, quicklook=None,
               "segments": int(blocks.segment.nunique()),
               "area_m2": float(blocks.area_m2.sum())}
     if quicklook is not None:
-        band = road_likelihood(raster, l_max=l_max, probability=probability)
+        band = road_likelihood(raster, l_max=options.l_max, probability=options.probability)
         write_quicklook(quicklook, [
             (blocks, dict(column="block_id", cmap="tab20", alpha=0.45, edgecolor="black",
                           linewidth=0.8)),

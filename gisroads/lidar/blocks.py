@@ -35,6 +35,8 @@ from airborne LIDAR data. ICCV Workshops, section 5 and Fig. 6.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import geopandas as gpd
 import numpy as np
 import shapely
@@ -355,12 +357,43 @@ def block_segments(affinity, *, road_weight: float, n_blocks: int | None = None,
     return segment
 
 
-def city_blocks(likelihood: GeoRaster, *, points_xy=None,
-                sample_spacing_m: float = SAMPLE_SPACING_M, max_edge_m: float = MAX_EDGE_M,
-                n_blocks: int | None = None, l_max: float = L_MAX,
-                probability: bool | None = None, road_fraction: float = ROAD_FRACTION,
-                min_block_area_m2: float = MIN_BLOCK_AREA_M2, seed: int = 0,
-                progress: Progress = None) -> gpd.GeoDataFrame:
+@dataclass(frozen=True)
+class BlockOptions:
+    """The options of :func:`city_blocks` (section 5 of the paper): the graph's nodes and
+    edges, the number of segments, how the likelihood is read and the smallest block.
+
+    Attributes
+    ----------
+    sample_spacing_m : float
+        Node spacing, metres (:data:`SAMPLE_SPACING_M`).
+    max_edge_m : float
+        Nodes closer than this are joined, metres (paper: 80 m).
+    n_blocks : int, optional
+        NCut segments ``k``. Default: from the largest eigengap of each region that no
+        road cuts (:func:`block_segments`).
+    l_max, probability
+        See :func:`road_likelihood`.
+    road_fraction : float
+        Cells with a likelihood of at least ``road_fraction * l_max`` are road: they get no
+        node and no block.
+    min_block_area_m2 : float
+        Smaller regions are dropped (:data:`MIN_BLOCK_AREA_M2`).
+    seed : int
+        Seed of NCut's eigensolver and discretisation: the result is deterministic.
+    """
+
+    sample_spacing_m: float = SAMPLE_SPACING_M
+    max_edge_m: float = MAX_EDGE_M
+    n_blocks: int | None = None
+    l_max: float = L_MAX
+    probability: bool | None = None
+    road_fraction: float = ROAD_FRACTION
+    min_block_area_m2: float = MIN_BLOCK_AREA_M2
+    seed: int = 0
+
+
+def city_blocks(likelihood: GeoRaster, options: BlockOptions = BlockOptions(), *,
+                points_xy=None, progress: Progress = None, **changes) -> gpd.GeoDataFrame:
     """City blocks of a road-likelihood raster (Zhu & Mordohai, section 5).
 
     Nodes off the roads (:func:`block_nodes`), edges within ``max_edge_m`` weighted by
@@ -382,24 +415,12 @@ def city_blocks(likelihood: GeoRaster, *, points_xy=None,
         ``sample_spacing_m`` square; blocks then cover only cells within two spacings of a
         node (no block where the cloud has no ground). Default: a regular sample of the
         raster, and blocks cover every valid non-road cell.
-    sample_spacing_m : float
-        Node spacing, metres (:data:`SAMPLE_SPACING_M`).
-    max_edge_m : float
-        Nodes closer than this are joined, metres (paper: 80 m).
-    n_blocks : int, optional
-        NCut segments ``k``. Default: from the largest eigengap of each region that no
-        road cuts (:func:`block_segments`).
-    l_max, probability
-        See :func:`road_likelihood`.
-    road_fraction : float
-        Cells with a likelihood of at least ``road_fraction * l_max`` are road: they get no
-        node and no block.
-    min_block_area_m2 : float
-        Smaller regions are dropped (:data:`MIN_BLOCK_AREA_M2`).
-    seed : int
-        Seed of NCut's eigensolver and discretisation: the result is deterministic.
+    options : BlockOptions
+        Graph, segments and blocks (:class:`BlockOptions`).
     progress : callable, optional
         ``progress(fraction, message)``; raising :class:`gisroads.progress.Cancelled` stops.
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
@@ -440,30 +461,31 @@ def city_blocks(likelihood: GeoRaster, *, points_xy=None,
     >>> bool(shapely.length(inside).sum() < 0.01 * shapely.length(lines).sum())
     True
     """
-    if n_blocks is not None and n_blocks < 1:
-        raise GisroadsError(f"n_blocks must be at least 1, got {n_blocks}")
-    if not 0 < road_fraction <= 1:
-        raise GisroadsError(f"road_fraction must lie in (0, 1], got {road_fraction}")
+    options = replace(options, **changes)
+    if options.n_blocks is not None and options.n_blocks < 1:
+        raise GisroadsError(f"n_blocks must be at least 1, got {options.n_blocks}")
+    if not 0 < options.road_fraction <= 1:
+        raise GisroadsError(f"road_fraction must lie in (0, 1], got {options.road_fraction}")
     report(progress, 0.0, "road likelihood")
-    band = road_likelihood(likelihood, l_max=l_max, probability=probability)
-    threshold = road_fraction * l_max
+    band = road_likelihood(likelihood, l_max=options.l_max, probability=options.probability)
+    threshold = options.road_fraction * options.l_max
     unit = _metres_per_unit(band.crs)
-    nodes = block_nodes(band, points_xy=points_xy, sample_spacing_m=sample_spacing_m,
+    nodes = block_nodes(band, points_xy=points_xy, sample_spacing_m=options.sample_spacing_m,
                         road_threshold=threshold)
     if len(nodes) < 2:
         raise GisroadsError(f"only {len(nodes)} node(s) off the roads: the likelihood marks "
                             f"(nearly) everything as road (>= {threshold:g}), or no point of "
                             "points_xy lies on the raster")
     report(progress, 0.05, f"{len(nodes)} nodes: affinities")
-    affinity = block_affinity(band, nodes, max_edge_m=max_edge_m,
+    affinity = block_affinity(band, nodes, max_edge_m=options.max_edge_m,
                               progress=scaled(progress, 0.05, 0.6))
     report(progress, 0.6, "normalized cut")
-    segment = block_segments(affinity, road_weight=np.exp(-threshold), n_blocks=n_blocks,
-                             seed=seed)
+    segment = block_segments(affinity, road_weight=np.exp(-threshold), n_blocks=options.n_blocks,
+                             seed=options.seed)
     report(progress, 0.8, f"{segment.max() + 1} segments: polygons")
     return _block_polygons(band, nodes, segment, threshold=threshold,
-                           reach=None if points_xy is None else 2 * sample_spacing_m / unit,
-                           min_area=min_block_area_m2 / unit ** 2, unit=unit)
+                           reach=None if points_xy is None else 2 * options.sample_spacing_m / unit,
+                           min_area=options.min_block_area_m2 / unit ** 2, unit=unit)
 
 
 def _block_polygons(band: GeoRaster, nodes: np.ndarray, segment: np.ndarray, *,
