@@ -13,6 +13,7 @@ from gisroads.jobs import JOBS, job_defaults, run_job
 from gisroads.jobs.common import _layer, _map_lines
 from gisroads.lidar.hypotheses import DEFAULT_WIDTHS_M
 from gisroads.synthetic import make_scene
+from gisroads.update import MatchOptions
 
 
 def _gisroads(*args):
@@ -28,6 +29,24 @@ def test_defaults_are_the_jobs_signatures_as_json():
     assert defaults["likelihood_job"]["widths_m"] == list(DEFAULT_WIDTHS_M)
     assert "progress" not in defaults["evidence_job"]
     assert defaults == {name: job_defaults(name) for name in JOBS}
+    # a job taking an options object lists its fields one by one, not the object
+    assert defaults["update_job"]["tolerance_m"] == MatchOptions().tolerance_m
+    assert defaults["blocks_job"]["max_edge_m"] == 80.0 and "options" not in defaults["blocks_job"]
+
+
+def test_a_job_takes_the_fields_of_its_options_object(tmp_path):
+    scene = make_scene(seed=2, size_m=(300, 300))
+    lines = tmp_path / "lines.gpkg"
+    scene.truth.centrelines.to_file(lines, driver="GPKG")
+    results = {}
+    for name, arguments in (("default", {}), ("short kept", {"min_total_length_m": 0.0})):
+        results[name] = run_job("junctions_job", {"lines": str(lines),
+                                                  "out_path": str(tmp_path / "n.gpkg"),
+                                                  **arguments})
+    assert results["default"]["roads"] > 0
+    assert results["short kept"]["length_m"] >= results["default"]["length_m"]
+    with pytest.raises(GisroadsError, match="takes no options"):
+        run_job("junctions_job", {"lines": str(lines), "out_path": "x.gpkg", "options": {}})
 
 
 def test_a_job_runs_from_json_and_bad_arguments_are_one_line(tmp_path):
