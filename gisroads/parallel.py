@@ -21,12 +21,36 @@ import subprocess
 import sys
 import time
 from contextvars import ContextVar
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from collections.abc import Callable, Sequence
 
 from .errors import GisroadsError
 from .progress import Progress, report
+
+
+@dataclass(frozen=True)
+class Parallel:
+    """Where the tasks of a run go.
+
+    Attributes
+    ----------
+    workers : int
+        Tasks run on a local Dask cluster of this many single-threaded worker processes;
+        1 runs them in this process, without Dask.
+    scheduler : str, optional
+        Address of an existing Dask scheduler to run them on instead (its workers must see
+        ``work_dir``).
+    work_dir : str or Path, optional
+        Folder for the tile store and the finished tasks, keyed by the inputs and the
+        parameters: a run stopped midway and started again reuses what was finished. By
+        default a temporary folder, removed at the end.
+    """
+
+    workers: int = 1
+    scheduler: str | None = None
+    work_dir: object = None
 
 
 def default_workers() -> int:

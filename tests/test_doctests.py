@@ -29,6 +29,7 @@ MODULES = [
     "gisroads.lidar.intensity",
     "gisroads.lidar.pipeline",
     "gisroads.network.rasters",
+    "gisroads.options",
     "gisroads.snakes.pipeline",
     "gisroads.synthetic.canal",
     "gisroads.synthetic.cloud",

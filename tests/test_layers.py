@@ -4,8 +4,8 @@ imports another.
 
 Floors, bottom up (a package may import from its own floor and those below):
 
-0. the types and plumbing: ``geo``, ``progress``, ``errors``, ``resources``, ``optimize``
-   and the package's ``__init__``;
+0. the types and plumbing: ``geo``, ``progress``, ``errors``, ``resources``, ``optimize``,
+   ``options`` and the package's ``__init__``;
 1. reading and writing, running tasks: ``io``, ``parallel``;
 2. the shared stages: ``features``, ``segmentation``, ``vectorize``, ``network``,
    ``synthetic``, ``tiling``;
@@ -29,7 +29,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "gisroads"
 
 FLOORS = [
-    {"__init__", "geo", "progress", "errors", "resources", "optimize"},
+    {"__init__", "geo", "progress", "errors", "resources", "optimize", "options"},
     {"io", "parallel"},
     {"features", "segmentation", "vectorize", "network", "synthetic", "tiling"},
     {"evaluate"},

@@ -27,9 +27,11 @@ from ..lidar.intensity import data_extent, write_intensity_images
 from ..lidar.mincover import A, D_MAX, SEED_STEP_M, exact_min_cover, greedy_min_cover
 from ..lidar.roads import rectangles_to_roads
 from ..lidar.learned import save_evidence_model
-from ..lidar.pipeline import (EVIDENCE_THRESHOLD, TiledRoads, auto_cell_m,
-                              edges_and_segments, evidence_raster, extract_roads,
-                              ground_and_intensity, train_evidence_model)
+from ..lidar.pipeline import (LidarOptions, TiledRoads, auto_cell_m, edges_and_segments,
+                              evidence_raster, extract_roads, ground_and_intensity,
+                              train_evidence_model)
+from ..options import with_changes
+from ..parallel import Parallel
 from ..lidar.tagging import ground_level_heights, tag_road_points
 from ..tiling.tilestore import inputs_crs, las_inputs
 from ..progress import Progress, report, scaled
@@ -38,20 +40,10 @@ from .common import (_layer, _map_lines, _warn_if_empty, _warn_if_no_road, netwo
                      parse_metres, stage_default)
 
 
-def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "cue"),
-              tile_m: float = stage_default(extract_roads, "tile_m"),
-              overlap_m: float = stage_default(extract_roads, "overlap_m"),
-              cell_m: float | None = None, widths_m=DEFAULT_WIDTHS_M,
-              lengths_m=DEFAULT_LENGTHS_M,
-              n_segments: int = stage_default(extract_roads, "n_segments"),
-              t_planar: float = stage_default(extract_roads, "t_planar"),
-              t_vert: float = stage_default(extract_roads, "t_vert"),
-              threshold: float = EVIDENCE_THRESHOLD, network_options: dict | None = None,
-              min_points: int = stage_default(extract_roads, "min_points"),
-              workers: int = 1, scheduler: str | None = None, work_dir=None,
-              tile_maps: bool | None = None, tagged_las=None, rasters_dir=None,
-              background=None, quicklook=None, model=None,
-              progress: Progress = None) -> dict:
+def lidar_job(cloud_path, out_path, options: LidarOptions = LidarOptions(),
+              parallel: Parallel = Parallel(), *, tile_maps: bool | None = None,
+              tagged_las=None, rasters_dir=None, background=None, quicklook=None,
+              progress: Progress = None, **changes) -> dict:
     """The road network of a LAS/LAZ file into a road-network GeoPackage.
 
     Writes ``out_path`` (road_centrelines, road_polygons, junctions, and the QA layers of
@@ -63,7 +55,7 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
     intensity, else the road evidence, with its QGIS style beside it as ``.qml``; its kind
     in the result's ``background_kind``) and a
     ``quicklook`` PNG over the same image.
-    The parameters from ``cue`` to ``work_dir`` and ``model`` are those of
+    ``options``, ``parallel`` and ``**changes`` are those of
     :func:`gisroads.lidar.pipeline.extract_roads`; ``tile_maps`` defaults to keeping the
     tiles' likelihood maps only when ``rasters_dir`` is given. ``cloud_path`` may also be
     several files, a folder of them or a glob. A cloud without roads gives empty layers
@@ -82,22 +74,19 @@ def lidar_job(cloud_path, out_path, *, cue: str = stage_default(extract_roads, "
     cloud_path = inputs[0] if len(inputs) == 1 else cloud_path
     # the network only: the tiles' QA layers and rasters are written one tile at a time
     # from the files the tiles wrote, so that a city's driver holds one tile of them
-    with extract_roads(
-            cloud_path, cue=cue, tile_m=tile_m, overlap_m=overlap_m, cell_m=cell_m,
-            widths_m=widths_m, lengths_m=lengths_m, n_segments=n_segments, t_planar=t_planar,
-            t_vert=t_vert, threshold=threshold, network_options=network_options,
-            min_points=min_points, workers=workers, scheduler=scheduler, work_dir=work_dir,
-            lazy=True, model=model, progress=scaled(progress, 0.0, 0.8)) as roads:
+    options, parallel = with_changes(changes, options, parallel)
+    with extract_roads(cloud_path, options, parallel, lazy=True,
+                       progress=scaled(progress, 0.0, 0.8)) as roads:
         network = roads.network
         rasters = None if rasters_dir is None else Path(rasters_dir)
         # the tiles' per-width likelihood maps are read only to be written
         tile_maps = rasters is not None if tile_maps is None else tile_maps
-        _write_tiles(roads, out_path, rasters, tile_maps=tile_maps, widths_m=widths_m,
+        _write_tiles(roads, out_path, rasters, tile_maps=tile_maps, widths_m=options.widths_m,
                      progress=scaled(progress, 0.8, 0.9))
         _warn_if_no_road(network, cloud_path)
         working, _ = inputs_crs(inputs)
         result = {**network_summary(out_path, network),
-                  "tiles": roads.run.get("with_points", len(roads.tiles)), "cue": cue,
+                  "tiles": roads.run.get("with_points", len(roads.tiles)), "cue": options.cue,
                   "input_files": len(inputs),
                   "tiles_run": roads.run.get("tiles", 0),
                   "tiles_reused": roads.run.get("reused", 0)}

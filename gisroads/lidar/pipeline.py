@@ -19,7 +19,7 @@ them) out, and the network stage again.
 from __future__ import annotations
 
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache, partial
 from pathlib import Path
 from typing import NamedTuple
@@ -37,7 +37,9 @@ from ..features.edges import local_energy
 from ..geo import SERVICE_CENTRELINES, GeoRaster, RoadNetwork
 from ..io.las import PointCloud
 from ..io.raster import geotiff_writer
-from ..parallel import NOT_KEPT, for_each_result, keep_result, kept_result, shared_workers
+from ..options import with_changes
+from ..parallel import (NOT_KEPT, Parallel, for_each_result, keep_result, kept_result,
+                        shared_workers)
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.branches import branches_into
@@ -619,12 +621,23 @@ def service_lines(lines: gpd.GeoDataFrame) -> gpd.GeoDataFrame:
 
 @dataclass(frozen=True)
 class LidarOptions:
-    """The options of :func:`extract_roads`: the tiles, the image cell, the evidence cue's
-    threshold and network stage, and the intensity cue's stages (``widths_m``,
-    ``lengths_m``, ``n_segments``, ``t_planar``, ``t_vert``: see :func:`extract_tile`).
+    """The options of :func:`extract_roads`: the cue and its model, the tiles, the image
+    cell, the evidence cue's threshold and network stage, and the intensity cue's stages
+    (``widths_m``, ``lengths_m``, ``n_segments``, ``t_planar``, ``t_vert``: see
+    :func:`extract_tile`).
 
     Attributes
     ----------
+    cue : {"evidence", "intensity"}
+        ``evidence`` (the default, beyond the paper): the road likelihood of every cue the
+        cloud carries (the paper's ground intensity among them, and height, density,
+        roughness, slope, returns, classification, kerbs, whichever the file has) through
+        the network stage (module docstring); ``intensity``: Zhu & Mordohai's Algorithm 1
+        alone.
+    model : str or Path, optional
+        ``cue="evidence"``: an evidence model learned from a road layer of the area
+        (:func:`train_evidence_model`; beyond the paper): its probability replaces the
+        rule's likelihood.
     tile_m, overlap_m : float
         Tile side and overlap with each neighbour, metres (paper: 300 m and 100 m).
     cell_m : float, optional
@@ -638,6 +651,8 @@ class LidarOptions:
         Tiles with fewer points are skipped.
     """
 
+    cue: str = "evidence"
+    model: object = None
     tile_m: float = TILE_M
     overlap_m: float = OVERLAP_M
     cell_m: float | None = None
@@ -651,10 +666,10 @@ class LidarOptions:
     min_points: int = 1000
 
 
-def extract_roads(path, options: LidarOptions = LidarOptions(), *, cue: str = "evidence",
-                  workers: int = 1, scheduler: str | None = None, work_dir=None,
-                  tile_maps: bool = True, lazy: bool = False, model=None,
-                  progress: Progress = None, **changes) -> LidarRoads | TiledRoads:
+def extract_roads(path, options: LidarOptions = LidarOptions(),
+                  parallel: Parallel = Parallel(), *, tile_maps: bool = True,
+                  lazy: bool = False, progress: Progress = None,
+                  **changes) -> LidarRoads | TiledRoads:
     """The road network of a point cloud, tile by tile.
 
     The input is read once: its points are bucketed into the tile grid on disk
@@ -665,23 +680,6 @@ def extract_roads(path, options: LidarOptions = LidarOptions(), *, cue: str = "e
     path : str or Path, or a list of them
         A LAS/LAZ file, several, a folder of them or a glob (``"tiles/*.laz"``): tiles of
         one area in one CRS; where files overlap, a tile holds the points of each.
-    cue : {"evidence", "intensity"}
-        ``evidence`` (the default, beyond the paper): the road likelihood of every cue the
-        cloud carries (the paper's ground intensity among them, and height, density,
-        roughness, slope, returns, classification, kerbs, whichever the file has) through
-        the network stage (module docstring); ``intensity``: Zhu & Mordohai's Algorithm 1
-        alone.
-    workers : int
-        Tiles run as tasks on a local Dask cluster of this many single-threaded worker
-        processes; 1 runs them in this process, without Dask.
-    scheduler : str, optional
-        Address of an existing Dask scheduler to run the tiles on instead (its workers
-        must see ``work_dir``).
-    work_dir : str or Path, optional
-        Folder for the tile store and the finished tiles, keyed by the inputs (path, size,
-        modification time) and the parameters: a run stopped midway (Ctrl-C, a power cut)
-        and started again reuses what was finished. By default a temporary folder,
-        removed at the end.
     tile_maps : bool
         Keep every tile whole with its per-width likelihood maps in ``LidarRoads.tiles``;
         False keeps of each tile only its core (its QA layers, intensity and heights;
@@ -691,14 +689,14 @@ def extract_roads(path, options: LidarOptions = LidarOptions(), *, cue: str = "e
         left in the files the tiles wrote, to be read one tile at a time (a city's outputs
         written in the memory of one tile: :func:`gisroads.jobs.lidar.lidar_job`). Use it
         as a context manager: its end removes the temporary tile store.
-    model : str or Path, optional
-        ``cue="evidence"``: an evidence model learned from a road layer of the area
-        (:func:`train_evidence_model`; beyond the paper): its probability replaces the
-        rule's likelihood.
     options : LidarOptions
-        Tiles, cell and the cues' options (:class:`LidarOptions`).
+        The cue, its model, tiles, cell and the cues' options (:class:`LidarOptions`).
+    parallel : Parallel
+        Where the tiles run, and the work folder a stopped run resumes from
+        (:class:`gisroads.parallel.Parallel`).
     **changes
-        Fields of ``options`` to change for this call.
+        Fields of ``options`` or ``parallel`` to change for this call, e.g.
+        ``cue="intensity"`` or ``workers=2``.
 
     Returns
     -------
@@ -742,7 +740,9 @@ def extract_roads(path, options: LidarOptions = LidarOptions(), *, cue: str = "e
     >>> buffer_metrics(evidence.network.centrelines, scene.truth.centrelines).completeness > 0.9
     True
     """
-    options = replace(options, **changes)
+    options, parallel = with_changes(changes, options, parallel)
+    cue, model = options.cue, options.model
+    where = asdict(parallel)
     if cue not in CUES:
         raise GisroadsError(f"cue must be one of {CUES}, not {cue!r}")
     if model is not None:
@@ -750,21 +750,21 @@ def extract_roads(path, options: LidarOptions = LidarOptions(), *, cue: str = "e
             raise GisroadsError("a model works on the evidence cue; leave --cue out")
         load_evidence_model(model)  # refused before any work
     with shared_workers():  # one cluster for the reading pass and the tiles
-        parallel = dict(workers=workers, scheduler=scheduler, work_dir=work_dir)
         if cue == "evidence":
             roads = _evidence_roads(path, threshold=options.threshold,
                                     network_options=options.network_options, model=model,
                                     progress=progress, tile_m=options.tile_m,
                                     overlap_m=options.overlap_m, cell_m=options.cell_m,
-                                    min_points=options.min_points, **parallel)
+                                    min_points=options.min_points, **where)
             tiled = TiledRoads(roads.network, cue, tiles=[], files=[], levels=0, imaged=False,
                                evidence=roads.evidence,
                                ground_intensity=roads.ground_intensity, cues=roads.cues,
                                run=roads.run)
         else:
-            store = open_store(path, work_dir, tile_m=options.tile_m,
-                               overlap_m=options.overlap_m, workers=workers,
-                               scheduler=scheduler, progress=scaled(progress, 0.0, 0.1))
+            store = open_store(path, parallel.work_dir, tile_m=options.tile_m,
+                               overlap_m=options.overlap_m, workers=parallel.workers,
+                               scheduler=parallel.scheduler,
+                               progress=scaled(progress, 0.0, 0.1))
             try:
                 stages = dict(widths_m=tuple(options.widths_m),
                               lengths_m=tuple(options.lengths_m),
@@ -772,9 +772,9 @@ def extract_roads(path, options: LidarOptions = LidarOptions(), *, cue: str = "e
                               t_vert=options.t_vert)
                 tiled = _intensity_roads(store, cell_m=options.cell_m,
                                          min_points=options.min_points, options=stages,
-                                         progress=scaled(progress, 0.1, 0.95), **parallel)
+                                         progress=scaled(progress, 0.1, 0.95), **where)
             except BaseException:
-                if work_dir is None:
+                if parallel.work_dir is None:
                     store.remove()
                 raise
     if lazy:
