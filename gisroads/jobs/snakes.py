@@ -11,8 +11,9 @@ from ..io.las import cloud_crs
 from ..io.quicklook import write_quicklook
 from ..io.raster import write_geotiff
 from ..io.vector import write_geopackage
+from ..parallel import Parallel
 from ..progress import Progress, report, scaled
-from ..snakes.pipeline import CLEARANCE_M, curb_attractor, extract_map_guided
+from ..snakes.pipeline import CLEARANCE_M, RibbonOptions, curb_attractor, extract_map_guided
 from ..snakes.registration import SNAP_M, SUPPORT_RADIUS_M, register_map
 from ..snakes.subclouds import read_corridor
 from .common import _map_lines, _warn_if_no_road, network_summary, stage_default
@@ -35,12 +36,10 @@ def attractor_job(cloud_path, map_source, out_path, *,
             "shape": list(attractor.shape)}
 
 
-def snakes_job(cloud_path, map_source, out_path, *,
-               curb_detector: str = stage_default(extract_map_guided, "curb_detector"),
-               cell_m: float = stage_default(extract_map_guided, "cell_m"),
-               snap_m: float | None = None, clearance_m: float = CLEARANCE_M,
-               tagged_las=None, attractor_tif=None, quicklook=None, workers: int = 1,
-               scheduler: str | None = None, work_dir=None, progress: Progress = None) -> dict:
+def snakes_job(cloud_path, map_source, out_path, ribbon: RibbonOptions = RibbonOptions(),
+               parallel: Parallel = Parallel(), *, snap_m: float | None = None,
+               clearance_m: float = CLEARANCE_M, tagged_las=None, attractor_tif=None,
+               quicklook=None, progress: Progress = None, **changes) -> dict:
     """Map-guided road extraction with ribbon snakes (Boyko & Funkhouser, 2011).
 
     ``map_source``: a line file (the layer its source names, ``path|layername=...``, else
@@ -50,16 +49,15 @@ def snakes_job(cloud_path, map_source, out_path, *,
     ribbon_patches and registered_map) in the cloud's CRS; optionally ``tagged_las`` (the
     cloud with road points in class 11), ``attractor_tif`` (the patches' attractor maps)
     and a ``quicklook`` PNG (the ribbons and the map over the attractor maps). The
-    parameters as in :func:`gisroads.snakes.pipeline.extract_map_guided`. When no road is
+    parameters (``ribbon``, ``parallel``, ``**changes`` to their fields) as in
+    :func:`gisroads.snakes.pipeline.extract_map_guided`. When no road is
     fitted the layers are empty, with a :class:`~gisroads.errors.NoRoadFoundWarning`.
     """
     road_map = _map_lines(map_source)
-    roads = extract_map_guided(cloud_path, road_map, curb_detector=curb_detector,
-                               cell_m=cell_m, snap_m=snap_m, clearance_m=clearance_m,
-                               tagged_las=tagged_las, workers=workers, scheduler=scheduler,
-                               work_dir=work_dir,
+    roads = extract_map_guided(cloud_path, road_map, ribbon, parallel, snap_m=snap_m,
+                               clearance_m=clearance_m, tagged_las=tagged_las,
                                attractor=attractor_tif is not None or quicklook is not None,
-                               progress=scaled(progress, 0.0, 0.95))
+                               progress=scaled(progress, 0.0, 0.95), **changes)
     network = roads.network
     write_geopackage(out_path, network.layers())
     _warn_if_no_road(network, cloud_path)

@@ -27,7 +27,8 @@ from ..errors import GisroadsError
 from ..geo import GeoRaster, RoadNetwork
 from ..io.las import ROAD_SURFACE_CLASS, cloud_crs, write_classified
 from ..tiling.tilestore import code_fingerprint, digest
-from ..parallel import NOT_KEPT, keep_result, kept_result, run_tasks, shared_workers
+from ..options import with_changes
+from ..parallel import NOT_KEPT, Parallel, keep_result, kept_result, run_tasks, shared_workers
 from ..progress import Progress, report, scaled
 from ..vectorize.ribbons import ribbon_areas, ribbons_to_network
 from .attractor import ALPHA_ATTR, BETA_ATTR, LANE_M, MIN_NEIGHBOURS, attractor_map
@@ -539,10 +540,11 @@ def _code_fingerprint() -> str:
 
 
 def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame,
-                       ribbon: RibbonOptions = RibbonOptions(), *, snap_m: float | None = None,
-                       tagged_las=None, clearance_m: float = CLEARANCE_M, workers: int = 1,
-                       scheduler: str | None = None, work_dir=None, attractor: bool = True,
-                       progress: Progress = None, **changes) -> MapGuidedRoads:
+                       ribbon: RibbonOptions = RibbonOptions(),
+                       parallel: Parallel = Parallel(), *, snap_m: float | None = None,
+                       tagged_las=None, clearance_m: float = CLEARANCE_M,
+                       attractor: bool = True, progress: Progress = None,
+                       **changes) -> MapGuidedRoads:
     """Roads of a LAS/LAZ file along an approximate road map (Boyko & Funkhouser, 2011).
 
     The file is decoded once into a tile store of :data:`PATCH_CELL_M` cells
@@ -565,20 +567,16 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame,
         Where to write the cloud with the road points in class 11.
     clearance_m : float
         Height (metres) above which a crossing ribbon passes over another (a bridge).
-    workers : int
-        Patches run as tasks on a local Dask cluster of this many single-threaded worker
-        processes; 1 runs them in this process, without Dask.
-    scheduler : str, optional
-        Address of an existing Dask scheduler (its workers must see ``work_dir``).
-    work_dir : str or Path, optional
-        Folder for the tile store and the finished patches, keyed by the input, the map's
-        registered samples and the parameters: a stopped run started again reuses them.
-        By default a temporary folder, removed at the end.
+    parallel : Parallel
+        Where the patches run, and the work folder (keyed by the input, the map's
+        registered samples and the parameters) a stopped run resumes from
+        (:class:`gisroads.parallel.Parallel`).
     attractor : bool
         Return the attractor mosaic (False: the patches' maps are dropped as they finish).
     progress : callable, optional
     **changes
-        Fields of ``ribbon`` to change for this call, e.g. ``curb_detector="step"``.
+        Fields of ``ribbon`` or ``parallel`` to change for this call, e.g.
+        ``curb_detector="step"`` or ``workers=2``.
 
     Returns
     -------
@@ -610,7 +608,8 @@ def extract_map_guided(cloud_path, map_lines: gpd.GeoDataFrame,
 
     from ..tiling.tilestore import open_store
 
-    ribbon = replace(ribbon, **changes)
+    ribbon, parallel = with_changes(changes, ribbon, parallel)
+    workers, scheduler, work_dir = parallel.workers, parallel.scheduler, parallel.work_dir
     lines, working = _map_in_cloud_crs(cloud_path, map_lines)
     with shared_workers():  # one cluster for the reading pass and the patches
         store = open_store(cloud_path, work_dir, tile_m=PATCH_CELL_M, overlap_m=0.0,
