@@ -296,12 +296,25 @@ class ImageRoads(NamedTuple):
 
 @dataclass(frozen=True)
 class ImageOptions:
-    """The options of :func:`extract_image_roads` beyond its inputs and model: the papers'
-    stages (segments, criteria, gaps, network, tiles) and the boosted trees' adaptation and
-    context model.
+    """The options of :func:`extract_image_roads` beyond its inputs and model: the bands'
+    roles, the path and its threshold, the papers' stages (segments, criteria, gaps,
+    network, tiles), the boosted trees' adaptation and context model, the threads.
 
     Attributes
     ----------
+    nir_band, red_band : int, optional
+        1-based; a NIR band adds the NDVI factor to the segmentation, the NDVI test of the
+        road parts and vegetation as gap context.
+    method : str, optional
+        ``"grote-rottensteiner"`` (the papers' stages, with the probability as road-part
+        criterion and gap context when there is one) or ``"learned-probability"`` (the
+        probability alone through :func:`gisroads.network.rasters.raster_to_network` at
+        ``probability_threshold``; needs a model). Default: :data:`DEFAULT_METHOD` with a
+        model, the papers' stages without one.
+    probability_threshold : float, optional
+        See ``method``; by default the model's own (:func:`default_threshold`), for the
+        convolutional network lowered on an image it is unsure of (:func:`image_threshold`;
+        not for one fine-tuned on the image's road layer).
     n_segments : int, optional
         NCut over-segmentation size; default
         :func:`gisroads.imagery.segments.default_counts`.
@@ -323,8 +336,14 @@ class ImageOptions:
         stitched at the seams, then one network stage over the whole image; QA layers get
         a ``tile`` column; ``n_segments`` then counts per tile). The probability path tiles
         in its own network stage.
+    threads : int or None
+        BLAS/OpenMP threads during the run (:func:`pinned_threads`).
     """
 
+    nir_band: int | None = None
+    red_band: int | None = None
+    method: str | None = None
+    probability_threshold: float | None = None
     n_segments: int | None = None
     road_part_criteria: dict | None = None
     gap_options: dict | None = None
@@ -333,23 +352,19 @@ class ImageOptions:
     adapt: bool = True
     context: object = "default"
     tile_px: int = TILE_PX
+    threads: int | None = 1
 
 
 def extract_image_roads(image: GeoRaster, options: ImageOptions = ImageOptions(), *,
-                        nir_band: int | None = None, red_band: int | None = None,
                         dsm: GeoRaster | None = None, model="default",
-                        probability: GeoRaster | None = None, method: str | None = None,
-                        probability_threshold: float | None = None, threads: int | None = 1,
-                        progress: Progress = None, **changes) -> ImageRoads:
+                        probability: GeoRaster | None = None, progress: Progress = None,
+                        **changes) -> ImageRoads:
     """The road network of an aerial image (RGB, CIR or panchromatic; NIR and DSM optional).
 
     Parameters
     ----------
     image : GeoRaster
         ``(bands, rows, cols)`` in a projected CRS in metres; NaN or nodata = no data.
-    nir_band, red_band : int, optional
-        1-based; a NIR band adds the NDVI factor to the segmentation, the NDVI test of the
-        road parts and vegetation as gap context.
     dsm : GeoRaster, optional
         Surface heights (metres), any grid over the image: adds the height criterion of the
         grouping, the nDSM test of the road parts and buildings as gap context.
@@ -362,19 +377,8 @@ def extract_image_roads(image: GeoRaster, options: ImageOptions = ImageOptions()
         A road probability already computed on the image's grid (then ``model``,
         ``adapt`` and ``context`` are not used).
     options : ImageOptions
-        The papers' stages and the boosted trees (:class:`ImageOptions`).
-    method : str, optional
-        ``"grote-rottensteiner"`` (the papers' stages, with the probability as road-part
-        criterion and gap context when there is one) or ``"learned-probability"`` (the
-        probability alone through :func:`gisroads.network.rasters.raster_to_network` at
-        ``probability_threshold``; needs a model). Default: :data:`DEFAULT_METHOD` with a
-        model, the papers' stages without one.
-    probability_threshold : float, optional
-        See ``method``; by default the model's own (:func:`default_threshold`), for the
-        convolutional network lowered on an image it is unsure of (:func:`image_threshold`;
-        not for one fine-tuned on the image's road layer).
-    threads : int or None
-        BLAS/OpenMP threads during the run (:func:`pinned_threads`).
+        The bands, the path, the threshold, the papers' stages and the boosted trees
+        (:class:`ImageOptions`).
     progress : callable, optional
         ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
     **changes
@@ -413,10 +417,9 @@ def extract_image_roads(image: GeoRaster, options: ImageOptions = ImageOptions()
     (True, True)
     """
     options = replace(options, **changes)
-    with pinned_threads(threads):
-        return _extract(image, options, nir_band=nir_band, red_band=red_band, dsm=dsm,
-                        model=model, probability=probability, method=method,
-                        probability_threshold=probability_threshold, progress=progress)
+    with pinned_threads(options.threads):
+        return _extract(image, options, dsm=dsm, model=model, probability=probability,
+                        progress=progress)
 
 
 def _convnet_of_tiles(model) -> bool:
@@ -457,8 +460,10 @@ class _StageClock:
         self.clock = now
 
 
-def _extract(image, options: ImageOptions, *, nir_band, red_band, dsm, model, probability,
-             method, probability_threshold, progress) -> ImageRoads:
+def _extract(image, options: ImageOptions, *, dsm, model, probability,
+             progress) -> ImageRoads:
+    nir_band, red_band = options.nir_band, options.red_band
+    method, probability_threshold = options.method, options.probability_threshold
     if image.crs is not None and not image.crs.is_projected:
         raise GisroadsError("the image must be in a projected CRS in metres (reproject it, "
                             "e.g. to its UTM zone)")

@@ -4,6 +4,7 @@ on an image from a road layer."""
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import geopandas as gpd
@@ -13,7 +14,7 @@ from ..errors import GisroadsError
 from ..geo import GeoRaster
 from ..imagery.grouping import CRITERIA as GROUPING_CRITERIA
 from ..imagery.grouping import group_segments
-from ..imagery.pipeline import extract_image_roads, resolve_model
+from ..imagery.pipeline import ImageOptions, extract_image_roads, resolve_model
 from ..imagery.roadparts import CRITERIA as ROAD_PART_CRITERIA
 from ..imagery.roadparts import extract_road_parts, rasterize_segments
 from ..imagery.segments import frame_to_labels, segment_image, segments_to_frame
@@ -27,17 +28,10 @@ from .common import (_layer, _map_lines, _network_quicklook, _write_network,
                      network_summary, read_image, stage_default)
 
 
-def image_job(image_path, out_path, *, nir_band: int | None = None,
-              red_band: int | None = None, dsm_path=None, pixel_m: float | None = None,
-              crs=None, quicklook=None, model="default", context="default",
-              probability_path=None,
-              method: str | None = None, n_segments: int | None = None,
-              probability_threshold: float | None = None,
-              adapt: bool = stage_default(extract_image_roads, "adapt"),
-              threads: int | None = stage_default(extract_image_roads, "threads"),
-              road_part_criteria: dict | None = None, gap_options: dict | None = None,
-              weight_options: dict | None = None, network_options: dict | None = None,
-              progress: Progress = None) -> dict:
+def image_job(image_path, out_path, options: ImageOptions = ImageOptions(), *,
+              dsm_path=None, pixel_m: float | None = None, crs=None, quicklook=None,
+              model="default", probability_path=None, progress: Progress = None,
+              **changes) -> dict:
     """Road extraction of an aerial image into a GeoPackage: Grote & Rottensteiner's stages
     with a learned road cue (see :func:`gisroads.imagery.pipeline.extract_image_roads`).
 
@@ -49,15 +43,17 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     grid the image was worked on (its UTM zone for a geographic image). ``model``:
     ``"default"`` (the convolutional network), ``"boosted"`` (the boosted trees), a model
     file of :func:`train_job` (.onnx or .npz), or ``"none"`` (the papers' pipeline alone).
-    ``context``: the context model that re-scores the probability on the
-    probability path (:func:`gisroads.imagery.pipeline.resolve_context`: ``"default"``,
-    ``"none"`` or a model file). The parameters from ``method`` on are those of
-    :func:`gisroads.imagery.pipeline.extract_image_roads`. An image without roads gives
+    ``options`` (and ``**changes`` to its fields: ``nir_band``, ``context``, ``method``
+    ...) are those of :func:`gisroads.imagery.pipeline.extract_image_roads`; ``context``
+    is the context model that re-scores the probability on the probability path
+    (:func:`gisroads.imagery.pipeline.resolve_context`: ``"default"``, ``"none"`` or a
+    model file). An image without roads gives
     empty layers and a :class:`~gisroads.errors.NoRoadFoundWarning`.
     """
+    options = replace(options, **changes)
     image, source_crs = read_image(image_path, pixel_m=pixel_m, crs=crs)
     band_count = image.data.shape[0] if image.data.ndim == 3 else 1
-    for name, band in (("NIR", nir_band), ("red", red_band)):
+    for name, band in (("NIR", options.nir_band), ("red", options.red_band)):
         if band is not None and not 1 <= band <= band_count:
             raise GisroadsError(f"{image_path}: no {name} band {band} (the image has "
                              f"{band_count} band(s))")
@@ -65,13 +61,8 @@ def image_job(image_path, out_path, *, nir_band: int | None = None,
     if probability_path is not None and model is None:
         raise GisroadsError("a road probability raster needs a model (not --model none)")
     dsm = read_raster(dsm_path) if dsm_path is not None else None
-    roads = extract_image_roads(
-        image, nir_band=nir_band, red_band=red_band, dsm=dsm, model=model, context=context,
-        method=method,
-        n_segments=n_segments, probability_threshold=probability_threshold, adapt=adapt,
-        threads=threads, road_part_criteria=road_part_criteria, gap_options=gap_options,
-        weight_options=weight_options, network_options=network_options,
-        progress=scaled(progress, 0.0, 0.95))
+    roads = extract_image_roads(image, options, dsm=dsm, model=model,
+                                progress=scaled(progress, 0.0, 0.95))
     network = roads.network
     _write_network(out_path, network, image.crs, source_crs, image_path)
     result = {**network_summary(out_path, network), "cues": roads.report["cues"]["cues"],
