@@ -3,6 +3,7 @@ network stages of the imagery method alone: subgraph linking of road parts, and 
 construction of any line layer."""
 from __future__ import annotations
 
+from dataclasses import asdict, replace
 from pathlib import Path
 
 from ..errors import GisroadsError
@@ -11,7 +12,7 @@ from ..io.raster import read_raster
 from ..io.vector import write_geopackage
 from ..network.junctions import NetworkOptions, road_strings_from_lines, strings_to_network
 from ..network.rasters import THRESHOLD, raster_to_network
-from ..network.subgraph import edge_weights, gap_edges, link_road_parts, road_strings
+from ..network.subgraph import GapOptions, edge_weights, link_road_parts, road_strings
 from ..progress import Progress, report, scaled
 from .common import (_layer, _network_quicklook, _warn_if_no_road, _write_network,
                      network_summary, read_image, stage_default)
@@ -56,16 +57,11 @@ def vectorize_job(raster_path, out_path, *, band: int | None = None,
     return result
 
 
-def linking_job(road_parts, linked_path, *, image_path=None, nir_band: int | None = None,
-                red_band: int | None = None, dsm_path=None, edited_gap_edges=None,
-                max_gap_m: float = stage_default(gap_edges, "max_gap_m"),
-                max_gap_relative: float = stage_default(gap_edges, "max_gap_relative"),
-                max_direction_diff_rad: float = stage_default(gap_edges,
-                                                              "max_direction_diff_rad"),
-                max_lateral_offset_m: float = stage_default(gap_edges, "max_lateral_offset_m"),
-                max_overlap_m: float = stage_default(gap_edges, "max_overlap_m"),
+def linking_job(road_parts, linked_path, gaps: GapOptions = GapOptions(), *,
+                image_path=None, nir_band: int | None = None, red_band: int | None = None,
+                dsm_path=None, edited_gap_edges=None,
                 small_gap_m: float = stage_default(edge_weights, "small_gap_m"),
-                progress: Progress = None) -> dict:
+                progress: Progress = None, **changes) -> dict:
     """Subgraph linking (Grote et al. 2012, Sec. 2.2): gap edges between the ends of road
     parts, their context and weights, the integer program's selection, road strings
     (:func:`gisroads.network.subgraph.link_road_parts`).
@@ -75,23 +71,23 @@ def linking_job(road_parts, linked_path, *, image_path=None, nir_band: int | Non
     give the gaps' context (shadow, asphalt, vegetation, buildings, vehicles); they must be
     in the parts' CRS. ``edited_gap_edges``: a ``gap_edges`` layer of an earlier run, its
     ``selected`` edited by hand: the strings then follow it and nothing is recomputed.
-    Writes ``linked_path`` (GeoPackage): ``gap_edges`` and ``road_strings``.
+    ``gaps`` (and ``**changes`` to its fields): the limits of a gap edge
+    (:func:`gisroads.network.subgraph.gap_edges`); ``small_gap_m``: of
+    :func:`gisroads.network.subgraph.edge_weights`. Writes ``linked_path`` (GeoPackage):
+    ``gap_edges`` and ``road_strings``.
     """
     parts = _layer(road_parts, "road_parts")
     if edited_gap_edges is not None:
-        gaps = _layer(edited_gap_edges, "gap_edges")
-        strings = road_strings(parts, gaps)
+        edges = _layer(edited_gap_edges, "gap_edges")
+        strings = road_strings(parts, edges)
     else:
-        gaps, strings = link_road_parts(
+        edges, strings = link_road_parts(
             parts, **_gap_context(parts.crs, image_path, dsm_path, nir_band, red_band),
-            gap_options={"max_gap_m": max_gap_m, "max_gap_relative": max_gap_relative,
-                         "max_direction_diff_rad": max_direction_diff_rad,
-                         "max_lateral_offset_m": max_lateral_offset_m,
-                         "max_overlap_m": max_overlap_m},
+            gap_options=asdict(replace(gaps, **changes)),
             weight_options={"small_gap_m": small_gap_m}, progress=progress)
-    write_geopackage(linked_path, {"gap_edges": gaps, "road_strings": strings})
-    return {"linked": Path(linked_path), "gap_edges": len(gaps),
-            "selected": int(gaps["selected"].fillna(False).astype(bool).sum()),
+    write_geopackage(linked_path, {"gap_edges": edges, "road_strings": strings})
+    return {"linked": Path(linked_path), "gap_edges": len(edges),
+            "selected": int(edges["selected"].fillna(False).astype(bool).sum()),
             "road_strings": len(strings)}
 
 

@@ -214,12 +214,31 @@ def _greedy_order(n_parts: int, quality: np.ndarray, pair_parts: np.ndarray):
     return subgraph, swapped
 
 
-def gap_edges(road_parts: gpd.GeoDataFrame, *, max_gap_m: float = MAX_GAP_M,
-              max_gap_relative: float = MAX_GAP_RELATIVE,
-              max_direction_diff_rad: float = MAX_DIRECTION_DIFF_RAD,
-              max_lateral_offset_m: float = MAX_LATERAL_OFFSET_M,
-              max_overlap_m: float = MAX_OVERLAP_M,
-              end_window_m: float = END_WINDOW_M) -> gpd.GeoDataFrame:
+@dataclass(frozen=True)
+class GapOptions:
+    """The options of :func:`gap_edges`: how far apart, how differently directed and how
+    offset two road-part ends may be to become a gap edge (Sec. 2.2.1).
+
+    Attributes
+    ----------
+    max_gap_m, max_gap_relative, max_direction_diff_rad, max_lateral_offset_m : float
+        Link criteria (metres, ratio, radians, metres).
+    max_overlap_m : float
+        Metres.
+    end_window_m : float
+        Length of the end section giving a part's direction at an end, metres.
+    """
+
+    max_gap_m: float = MAX_GAP_M
+    max_gap_relative: float = MAX_GAP_RELATIVE
+    max_direction_diff_rad: float = MAX_DIRECTION_DIFF_RAD
+    max_lateral_offset_m: float = MAX_LATERAL_OFFSET_M
+    max_overlap_m: float = MAX_OVERLAP_M
+    end_window_m: float = END_WINDOW_M
+
+
+def gap_edges(road_parts: gpd.GeoDataFrame, options: GapOptions = GapOptions(),
+              **changes) -> gpd.GeoDataFrame:
     """Gap edges: hypotheses linking road-part ends (subgraph generation, Sec. 2.2.1).
 
     Two part ends are linked when the gap between them is at most ``max_gap_m`` and at most
@@ -236,12 +255,10 @@ def gap_edges(road_parts: gpd.GeoDataFrame, *, max_gap_m: float = MAX_GAP_M,
         One LineString centre line per road part, projected CRS in metres, with
         ``part_id``, ``width_m``, ``quality`` (0..1) and band means ``mean_b1``, ``mean_b2``,
         ... (0..1; or ``mean_intensity``) for the colour difference.
-    max_gap_m, max_gap_relative, max_direction_diff_rad, max_lateral_offset_m : float
-        Link criteria (metres, ratio, radians, metres).
-    max_overlap_m : float
-        Metres.
-    end_window_m : float
-        Length of the end section giving a part's direction at an end, metres.
+    options : GapOptions
+        The limits of a gap edge (:class:`GapOptions`).
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
@@ -258,15 +275,16 @@ def gap_edges(road_parts: gpd.GeoDataFrame, *, max_gap_m: float = MAX_GAP_M,
     ValueError
         Missing columns, non-line or zero-length geometries, duplicate ids, geographic CRS.
     """
+    options = replace(options, **changes)
     _check_parts(road_parts)
     n = len(road_parts)
     if n < 2:
         return _empty(_GAP_COLUMNS, road_parts.crs)
     lines = road_parts.geometry.values
-    xy, outward = _part_ends(lines, end_window_m)
+    xy, outward = _part_ends(lines, options.end_window_m)
     length = shapely.length(lines)
     points = shapely.points(xy)
-    i, j = shapely.STRtree(points).query(points, predicate="dwithin", distance=max_gap_m)
+    i, j = shapely.STRtree(points).query(points, predicate="dwithin", distance=options.max_gap_m)
     i, j = i[(i < j) & (i // 2 != j // 2)], j[(i < j) & (i // 2 != j // 2)]
     d = xy[j] - xy[i]
     distance = np.hypot(d[:, 0], d[:, 1])
@@ -274,10 +292,11 @@ def gap_edges(road_parts: gpd.GeoDataFrame, *, max_gap_m: float = MAX_GAP_M,
     ahead_j = -np.einsum("ij,ij->i", d, outward[j])
     lateral = (np.abs(_cross(outward[i], d)) + np.abs(_cross(outward[j], d))) / 2.0
     direction = np.arccos(np.clip(-np.einsum("ij,ij->i", outward[i], outward[j]), -1, 1))
-    keep = ((distance <= max_gap_m)
-            & (distance <= max_gap_relative * (length[i // 2] + length[j // 2]))
-            & (ahead_i >= -max_overlap_m) & (ahead_j >= -max_overlap_m)
-            & (direction <= max_direction_diff_rad) & (lateral <= max_lateral_offset_m))
+    keep = ((distance <= options.max_gap_m)
+            & (distance <= options.max_gap_relative * (length[i // 2] + length[j // 2]))
+            & (ahead_i >= -options.max_overlap_m) & (ahead_j >= -options.max_overlap_m)
+            & (direction <= options.max_direction_diff_rad)
+            & (lateral <= options.max_lateral_offset_m))
     i, j, distance, lateral, direction = (a[keep] for a in (i, j, distance, lateral, direction))
     if len(i) == 0:
         return _empty(_GAP_COLUMNS, road_parts.crs)
