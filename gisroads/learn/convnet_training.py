@@ -21,7 +21,7 @@ import inspect
 import io
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -246,48 +246,80 @@ def road_loss(logit, road, valid, *, dice_weight: float = 1.0):
     return bce + dice_weight * dice
 
 
-def train_convnet(tiles: list[LabelledTile], *, steps: int, batch: int = 8,
-                  crop_px: int = 256, learning_rate: float = 3e-3, seed: int = 0,
-                  model: RoadUNet | None = None, freeze_batchnorm: bool = False,
-                  source_weights: dict | None = None, scale_range=(0.6, 1.6),
-                  nodata_share: float = 0.15, progress: Progress = None,
-                  checkpoint=None) -> RoadUNet:
+@dataclass(frozen=True)
+class TrainingOptions:
+    """The options of :func:`train_convnet`: the crops, their augmentation and the
+    optimiser.
+
+    Attributes
+    ----------
+    batch, crop_px : int
+        Crops per step and crop side (working pixels, a multiple of 32).
+    learning_rate : float
+        Peak of the one-cycle schedule (AdamW).
+    freeze_batchnorm : bool
+        Keep the batch-norm statistics of ``model`` (fine-tuning on a few tiles).
+    source_weights : dict, optional
+        Weight of each source (``LabelledTile.source``) in drawing a crop (equal by
+        default); tiles within a source by their area.
+    scale_range : (float, float)
+        Range of the random rescaling of a crop (augmentation).
+    nodata_share : float
+        Share of the crops given a no-data border (masked out of the loss).
+    """
+
+    batch: int = 8
+    crop_px: int = 256
+    learning_rate: float = 3e-3
+    freeze_batchnorm: bool = False
+    source_weights: dict | None = None
+    scale_range: tuple = (0.6, 1.6)
+    nodata_share: float = 0.15
+
+
+def train_convnet(tiles: list[LabelledTile], options: TrainingOptions = TrainingOptions(), *,
+                  steps: int, seed: int = 0, model: RoadUNet | None = None,
+                  progress: Progress = None, checkpoint=None, **changes) -> RoadUNet:
     """Train (or fine-tune) a :class:`RoadUNet` on labelled tiles.
 
     Parameters
     ----------
     tiles : list of LabelledTile
         On the model's working grid (:func:`working_tile`).
-    steps, batch, crop_px : int
-        Optimiser steps, crops per step and crop side (working pixels, a multiple of 32).
-    learning_rate : float
-        Peak of the one-cycle schedule (AdamW).
+    steps : int
+        Optimiser steps.
     seed : int
         Seeds numpy's and torch's generators: the same call gives the same model.
     model : RoadUNet, optional
         A model to fine-tune; a new one when None.
-    freeze_batchnorm : bool
-        Keep the batch-norm statistics of ``model`` (fine-tuning on a few tiles).
+    options : TrainingOptions
+        Crops, augmentation and optimiser (:class:`TrainingOptions`).
     checkpoint : callable, optional
         ``checkpoint(step, model)`` every 250 steps and at the end.
+    **changes
+        Fields of ``options`` to change for this call.
     """
+    options = replace(options, **changes)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     model = RoadUNet() if model is None else model
-    optimiser = torch.optim.AdamW(model.parameters(), lr=learning_rate, weight_decay=1e-4)
-    schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, max_lr=learning_rate,
+    optimiser = torch.optim.AdamW(model.parameters(), lr=options.learning_rate,
+                                  weight_decay=1e-4)
+    schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, max_lr=options.learning_rate,
                                                    total_steps=steps, pct_start=0.1)
     started = time.perf_counter()
     running = None
     for step in range(1, steps + 1):
         model.train()
-        if freeze_batchnorm:
+        if options.freeze_batchnorm:
             for module in model.modules():
                 if isinstance(module, nn.BatchNorm2d):
                     module.eval()
-        x, road, valid = training_batch(tiles, rng, batch=batch, crop_px=crop_px,
-                                        scale_range=scale_range, source_weights=source_weights,
-                                        nodata_share=nodata_share)
+        x, road, valid = training_batch(tiles, rng, batch=options.batch,
+                                        crop_px=options.crop_px,
+                                        scale_range=options.scale_range,
+                                        source_weights=options.source_weights,
+                                        nodata_share=options.nodata_share)
         loss = road_loss(model(x), road, valid)
         optimiser.zero_grad()
         loss.backward()
