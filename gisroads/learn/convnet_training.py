@@ -38,6 +38,7 @@ except ImportError as error:  # pragma: no cover - the message is the point
 from ..errors import GisroadsError
 from ..progress import Progress, report, scaled
 from .convnet import CHECK_SHARE, FINE_TUNE_STEPS, network_input, normalisation
+from .training import LayerLabels
 
 WIDTHS = (16, 32, 64, 128, 192)
 """Channels at 1/2, 1/4, 1/8, 1/16 and 1/32 of the working grid."""
@@ -476,12 +477,11 @@ def _check(probabilities: dict, grid, valid: np.ndarray, roads, threshold: float
     return found
 
 
-def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
-                       width_field: str | None = None, default_width_m: float = 6.0,
-                       guard_m: float = 5.0, core_fraction: float = 1.0,
-                       steps: int = FINE_TUNE_STEPS, learning_rate: float = 3e-4,
-                       off_layer: str = "base", check_share: float = CHECK_SHARE,
-                       seed: int = 0, progress: Progress = None) -> tuple[RoadUNet, dict]:
+def fine_tune_on_layer(image, roads, labels: LayerLabels = LayerLabels(core_fraction=1.0),
+                       *, model=None, steps: int = FINE_TUNE_STEPS,
+                       learning_rate: float = 3e-4, off_layer: str = "base",
+                       check_share: float = CHECK_SHARE, seed: int = 0,
+                       progress: Progress = None, **changes) -> tuple[RoadUNet, dict]:
     """Fine-tune the convolutional road model on an image with a road layer as labels (the
     road-database update case).
 
@@ -500,8 +500,10 @@ def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
         Road centre lines, any CRS.
     model : str or Path, optional
         An ``.onnx`` file of :func:`export_onnx` to start from; the bundled model when None.
-    width_m, width_field, default_width_m, guard_m, core_fraction
-        As :func:`gisroads.learn.training.layer_labels` (metres).
+    labels : LayerLabels
+        Widths, guard band and core (:class:`gisroads.learn.training.LayerLabels`; here
+        the whole width is road by default); ``**changes`` change its fields for this
+        call, e.g. ``width_field="width_m"``.
     steps : int
         Optimiser steps (:data:`FINE_TUNE_STEPS`); batch-norm statistics stay the base
         model's.
@@ -537,12 +539,11 @@ def fine_tune_on_layer(image, roads, *, model=None, width_m=None,
     base, metadata = model_from_onnx(model if model is not None else DEFAULT_CONVNET_PATH)
     report(progress, 0.0, "reading the image on the model's grid")
     bands, valid, grid = _working_grid(image, float(metadata["pixel_m"]))
-    options = dict(width_m=width_m, width_field=width_field, default_width_m=default_width_m,
-                   guard_m=guard_m, core_fraction=core_fraction)
+    labels = replace(labels, **changes)
     held = held_out_roads(roads, check_share, seed)
-    positive, negative = layer_labels(grid, roads[~held], **options)
+    positive, negative = layer_labels(grid, roads[~held], labels)
     if held.any():
-        negative &= layer_labels(grid, roads, **options)[1]
+        negative &= layer_labels(grid, roads, labels)[1]
     if not (positive & valid).any():
         raise GisroadsError("no road of the layer lies on the image")
     bands = np.clip(bands, -0.5, 1.5)

@@ -38,7 +38,7 @@ exactly scikit-learn's ``predict_proba[:, 1]`` for the exported classifier.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -265,11 +265,28 @@ def load_model(path=None, *, feature_names=None) -> RoadModel:
         metadata=json.loads(str(arrays["metadata"]))))
 
 
-def fit_model(X: np.ndarray, y: np.ndarray, *, seed: int = 0, max_iter: int = 80,
-              max_leaf_nodes: int = 31, max_depth: int = 6, learning_rate: float = 0.15,
-              min_samples_leaf: int = 200, l2_regularization: float = 1.0,
-              road_share: float | None = None, threads: int = 1,
-              metadata=None, feature_names=None) -> RoadModel:
+@dataclass(frozen=True)
+class TreeOptions:
+    """The boosted trees of :func:`fit_model`.
+
+    Attributes
+    ----------
+    max_iter, max_leaf_nodes, max_depth, learning_rate, min_samples_leaf, l2_regularization
+        ``HistGradientBoostingClassifier`` parameters (prediction time grows with
+        ``max_iter * max_depth``).
+    """
+
+    max_iter: int = 80
+    max_leaf_nodes: int = 31
+    max_depth: int = 6
+    learning_rate: float = 0.15
+    min_samples_leaf: int = 200
+    l2_regularization: float = 1.0
+
+
+def fit_model(X: np.ndarray, y: np.ndarray, trees: TreeOptions = TreeOptions(), *,
+              seed: int = 0, road_share: float | None = None, threads: int = 1,
+              metadata=None, feature_names=None, **changes) -> RoadModel:
     """Train boosted trees on feature samples (needs scikit-learn).
 
     Parameters
@@ -283,9 +300,8 @@ def fit_model(X: np.ndarray, y: np.ndarray, *, seed: int = 0, max_iter: int = 80
     seed : int
         ``random_state`` of the classifier (early stopping is off, so the fit is
         deterministic for a given scikit-learn).
-    max_iter, max_leaf_nodes, max_depth, learning_rate, min_samples_leaf, l2_regularization
-        ``HistGradientBoostingClassifier`` parameters (prediction time grows with
-        ``max_iter * max_depth``).
+    trees : TreeOptions
+        The trees (:class:`TreeOptions`).
     road_share : float, optional
         Share of road pixels the probabilities are calibrated to: balanced samples
         (half road) give a prior of 0.5, far above a real image's; the log-odds are shifted
@@ -294,6 +310,8 @@ def fit_model(X: np.ndarray, y: np.ndarray, *, seed: int = 0, max_iter: int = 80
         OpenMP threads of the fit (pinned with threadpoolctl).
     metadata : dict, optional
         Stored with the model; the parameters are added.
+    **changes
+        Fields of ``trees`` to change for this call.
     """
     from sklearn.ensemble import HistGradientBoostingClassifier
     from threadpoolctl import threadpool_limits
@@ -306,9 +324,7 @@ def fit_model(X: np.ndarray, y: np.ndarray, *, seed: int = 0, max_iter: int = 80
                             f"shape (n,), got {X.shape} and {y.shape}")
     if y.all() or not y.any():
         raise GisroadsError("training needs both road and non-road samples")
-    params = dict(max_iter=max_iter, max_leaf_nodes=max_leaf_nodes, max_depth=max_depth,
-                  learning_rate=learning_rate, min_samples_leaf=min_samples_leaf,
-                  l2_regularization=l2_regularization)
+    params = asdict(replace(trees, **changes))
     classifier = HistGradientBoostingClassifier(**params, early_stopping=False,
                                                 random_state=seed)
     with threadpool_limits(limits=threads):

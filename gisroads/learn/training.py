@@ -17,6 +17,7 @@ Three sources, each giving balanced, seeded feature samples ``X`` of shape
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import geopandas as gpd
@@ -29,8 +30,9 @@ from ..errors import GisroadsError, MissingFileError
 from ..geo import LOCAL_CRS, GeoRaster, local_transform
 from ..progress import Progress, report, scaled
 from . import features as ft
-from .model import (RoadModel, WorkGrid, blend_models, fit_model, image_probability, sigmoid,
-                    work_decision, work_probability)
+from ..options import with_changes
+from .model import (RoadModel, TreeOptions, WorkGrid, blend_models, fit_model,
+                    image_probability, sigmoid, work_decision, work_probability)
 
 TRAINING_PIXEL_M = (0.45, 0.6, 0.8, 1.0, 1.2)
 """Pixel sizes the labelled tiles are rescaled to, metres."""
@@ -190,6 +192,34 @@ def tile_samples(tiles, *, source_pixel_m: float = 0.6, pixel_sizes=TRAINING_PIX
     return np.concatenate(X, axis=1), np.concatenate(y)
 
 
+@dataclass(frozen=True)
+class LayerLabels:
+    """How a road layer labels the pixels of a grid (:func:`line_labels`): each road's
+    width, the guard band beside it and the core taught as road.
+
+    Attributes
+    ----------
+    width_m : float, optional
+        One width for every road, metres; else ``width_field`` or ``default_width_m``.
+    width_field : str, optional
+        Field holding each road's width in metres (empty or non-positive values take
+        ``default_width_m``).
+    default_width_m : float
+        Width of a road without one, metres.
+    guard_m : float
+        No negative within ``width / 2 + guard_m`` of a line, metres (the guard absorbs
+        misregistered lines and kerbs; OpenStreetMap lines are often 2-5 m off).
+    core_fraction : float
+        Positives within ``max(core_fraction * width / 2, pixel)`` of a line, in (0, 1].
+    """
+
+    width_m: float | None = None
+    width_field: str | None = None
+    default_width_m: float = 6.0
+    guard_m: float = 5.0
+    core_fraction: float = 0.5
+
+
 def _road_widths(roads: gpd.GeoDataFrame, width_m, width_field, default_width_m) -> np.ndarray:
     if width_m is not None:
         return np.full(len(roads), float(width_m))
@@ -201,18 +231,17 @@ def _road_widths(roads: gpd.GeoDataFrame, width_m, width_field, default_width_m)
     return np.full(len(roads), float(default_width_m))
 
 
-def layer_labels(grid: WorkGrid, roads: gpd.GeoDataFrame, **options
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def layer_labels(grid: WorkGrid, roads: gpd.GeoDataFrame, labels: LayerLabels = LayerLabels(),
+                 **changes) -> tuple[np.ndarray, np.ndarray]:
     """Positive and negative pixels of a work grid from road centre lines
-    (:func:`line_labels` on the grid; same keyword arguments)."""
-    return line_labels(roads, shape=grid.shape, transform=grid.transform,
-                       crs=grid.image.crs, pixel_m=grid.pixel_m, **options)
+    (:func:`line_labels` on the grid)."""
+    return line_labels(roads, labels, shape=grid.shape, transform=grid.transform,
+                       crs=grid.image.crs, pixel_m=grid.pixel_m, **changes)
 
 
-def line_labels(roads: gpd.GeoDataFrame, *, shape, transform, crs, pixel_m: float,
-                width_m=None, width_field: str | None = None, default_width_m: float = 6.0,
-                guard_m: float = 5.0, core_fraction: float = 0.5,
-                between_negative: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def line_labels(roads: gpd.GeoDataFrame, labels: LayerLabels = LayerLabels(), *, shape,
+                transform, crs, pixel_m: float, between_negative: bool = False,
+                **changes) -> tuple[np.ndarray, np.ndarray]:
     """Positive and negative cells of a raster grid from road centre lines.
 
     A road of width ``w`` gives positives within ``max(core_fraction * w / 2, pixel_m)`` of
@@ -230,16 +259,9 @@ def line_labels(roads: gpd.GeoDataFrame, *, shape, transform, crs, pixel_m: floa
     crs : CRS or None
     pixel_m : float
         Cell side, metres.
-    width_m : float, optional
-        Every road's width, metres; else ``width_field`` or ``default_width_m``.
-    width_field : str, optional
-        Field of ``roads`` holding each road's width, metres.
-    default_width_m : float
-        Width of a road without one, metres.
-    guard_m : float
-        Band beside each road's edge left out of the negatives, metres.
-    core_fraction : float
-        Share of the half width that is positive, in (0, 1].
+    labels : LayerLabels
+        Widths, guard band and core (:class:`LayerLabels`); ``**changes`` change its
+        fields for this call.
     between_negative : bool
         Cells in the guard bands of two or more roads but beyond every road's edge (plus
         half a cell) are negatives too: the median between two carriageways, the verge
@@ -249,6 +271,8 @@ def line_labels(roads: gpd.GeoDataFrame, *, shape, transform, crs, pixel_m: floa
     -------
     positive, negative : ndarray of bool, shape ``shape``
     """
+    labels = replace(labels, **changes)
+    guard_m, core_fraction = labels.guard_m, labels.core_fraction
     if guard_m < 0 or not 0 < core_fraction <= 1:
         raise GisroadsError("guard_m must be >= 0 and core_fraction in (0, 1]")
     if roads.crs is not None and crs is not None:
@@ -262,7 +286,8 @@ def line_labels(roads: gpd.GeoDataFrame, *, shape, transform, crs, pixel_m: floa
         # (rasterising infinite coordinates crashes GDAL)
         raise GisroadsError("the road layer's coordinates do not fit its CRS (metres "
                             "labelled as degrees?): give the layer its true CRS")
-    widths = _road_widths(roads, width_m, width_field, default_width_m)[keep]
+    widths = _road_widths(roads, labels.width_m, labels.width_field,
+                          labels.default_width_m)[keep]
     lines = lines[keep]
     if len(lines) == 0:
         raise GisroadsError("the road layer has no line")
@@ -290,13 +315,12 @@ def trained_on_road_layer(model: RoadModel) -> bool:
     return model.metadata.get("trained_on") == ROAD_LAYER
 
 
-def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
-                     width_field: str | None = None, default_width_m: float = 6.0,
-                     guard_m: float = 5.0, core_fraction: float = 0.5,
-                     samples: int = 100_000, base_samples=None, seed: int = 0,
+def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame,
+                     labels: LayerLabels = LayerLabels(), trees: TreeOptions = TreeOptions(),
+                     *, samples: int = 100_000, base_samples=None, seed: int = 0,
                      tile_px: int = 512, road_share=None,
                      unmapped_probability: float | None = None, progress: Progress = None,
-                     **fit_params) -> RoadModel:
+                     **changes) -> RoadModel:
     """Train a road model on an image from a road layer over it.
 
     Parameters
@@ -306,18 +330,10 @@ def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
     roads : GeoDataFrame
         Road centre lines (reprojected to the image's CRS); they need not be complete:
         missing roads fall among the negatives, a few per cent of them.
-    width_m : float, optional
-        One width for every road, metres.
-    width_field : str, optional
-        Field holding each road's width in metres (used when ``width_m`` is None; empty or
-        non-positive values take ``default_width_m``).
-    default_width_m : float
-        Width when neither is given, metres.
-    guard_m : float
-        No negative within ``width / 2 + guard_m`` of a line, metres (OpenStreetMap lines
-        are often 2-5 m off).
-    core_fraction : float
-        Positives within this share of the half-width of a line.
+    labels : LayerLabels
+        Widths, guard band and core of the layer's roads (:class:`LayerLabels`).
+    trees : TreeOptions
+        The boosted trees (:class:`~gisroads.learn.model.TreeOptions`).
     samples : int
         Samples drawn from the image, half road.
     base_samples : (X, y), optional
@@ -362,24 +378,22 @@ def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
         1500 x 1500 tile at 1 m).
     progress : callable, optional
         ``progress(fraction, message)``; may raise :class:`gisroads.progress.Cancelled`.
-    **fit_params
-        Passed to :func:`~gisroads.learn.model.fit_model`.
+    **changes
+        Fields of ``labels`` or ``trees`` to change for this call, e.g.
+        ``width_field="width_m"``.
 
     Raises
     ------
     ValueError
         Non-metric image, a layer without lines, bad widths, or no road pixel in the image.
     """
+    labels, trees = with_changes(changes, labels, trees)
     # a second fit samples the tiles again: their features are kept for it
     grid = WorkGrid(image, cache_mb=0.0 if unmapped_probability is None else ADAPT_CACHE_MB)
-    positive, negative = layer_labels(grid, roads, width_m=width_m, width_field=width_field,
-                                      default_width_m=default_width_m, guard_m=guard_m,
-                                      core_fraction=core_fraction)
+    positive, negative = layer_labels(grid, roads, labels)
     if not positive.any():
         raise GisroadsError("no road of the layer lies on the image")
-    surface, _ = layer_labels(grid, roads, width_m=width_m, width_field=width_field,
-                              default_width_m=default_width_m, guard_m=guard_m,
-                              core_fraction=1.0)
+    surface, _ = layer_labels(grid, roads, labels, core_fraction=1.0)
     surface_share = float(surface[_on_work_grid(ft.valid_pixels(image), grid)].mean())
     if road_share == "default":
         road_share = _bundled_road_share()
@@ -396,7 +410,7 @@ def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
     unmapped = 0
     if unmapped_probability is not None:
         report(progress, 0.4, "looking for roads the layer lacks")
-        first = fit_model(X, y, seed=seed, road_share=_bundled_road_share(), **fit_params)
+        first = fit_model(X, y, seed=seed, road_share=_bundled_road_share(), trees=trees)
         found = _unmapped_roads(grid, first, negative, unmapped_probability, tile_px=tile_px)
         unmapped = int(found.sum())
         if unmapped:
@@ -405,12 +419,14 @@ def train_from_layer(image: GeoRaster, roads: gpd.GeoDataFrame, *, width_m=None,
     if base_samples is not None:
         X = np.concatenate([X, np.asarray(base_samples[0], np.float32)], axis=1)
         y = np.concatenate([y, np.asarray(base_samples[1], bool)])
-    meta = {"trained_on": ROAD_LAYER, "guard_m": guard_m, "core_fraction": core_fraction,
-            "default_width_m": default_width_m, "base_samples": base_samples is not None,
+    meta = {"trained_on": ROAD_LAYER, "guard_m": labels.guard_m,
+            "core_fraction": labels.core_fraction, "default_width_m": labels.default_width_m,
+            "base_samples": base_samples is not None,
             "unmapped_probability": unmapped_probability, "unmapped_px": unmapped,
             "road_surface_share": surface_share}
     report(progress, 0.8, f"fitting the model on {len(y)} samples")
-    model = fit_model(X, y, seed=seed, metadata=meta, road_share=road_share, **fit_params)
+    model = fit_model(X, y, seed=seed, metadata=meta, road_share=road_share,
+                      trees=trees)
     report(progress, 1.0, "model trained")
     return model
 
