@@ -51,7 +51,7 @@ def _add_sample_options(p) -> None:
     from ..jobs import train_job, train_lidar_job
     p.add_argument("--width-field", help="field of the road layer holding each road's width "
                                          "in metres (empty values take --width)")
-    p.add_argument("--width", type=_positive, default=job_default(train_job, "width_m"),
+    p.add_argument("--width", type=_positive, default=job_default(train_job, "default_width_m"),
                    help="road width in metres where no width field or value is given "
                         "(default %(default)g)")
     p.add_argument("--samples", type=int, default=job_default(train_job, "samples"),
@@ -77,7 +77,7 @@ def run(args) -> int:
         print_result(result, args.json)
         return 0
     result = train_job(args.image, args.roads, args.out, width_field=args.width_field,
-                       width_m=args.width, pixel_m=args.pixel, crs=args.crs,
+                       default_width_m=args.width, pixel_m=args.pixel, crs=args.crs,
                        samples=args.samples, seed=args.seed, base=args.base,
                        steps=args.steps, check_share=args.check,
                        progress=ProgressBar(not args.json), **guard)

@@ -4,7 +4,7 @@ on an image from a road layer."""
 from __future__ import annotations
 
 import warnings
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import geopandas as gpd
@@ -22,7 +22,8 @@ from ..io.vector import write_geopackage
 from ..io.raster import read_raster, write_geotiff
 from ..learn.convnet import CHECK_SHARE, FINE_TUNE_STEPS
 from ..learn.model import save_model, with_metadata
-from ..learn.training import train_from_layer
+from ..learn.training import LayerLabels, train_from_layer
+from ..options import with_changes
 from ..progress import Progress, report, scaled
 from .common import (_layer, _map_lines, _network_quicklook, _write_network,
                      network_summary, read_image, stage_default)
@@ -84,32 +85,53 @@ def image_job(image_path, out_path, options: ImageOptions = ImageOptions(), *,
     return result
 
 
-def train_job(image_path, roads_path, out_path, *, width_field: str | None = None,
-              width_m: float = stage_default(train_from_layer, "default_width_m"),
-              guard_m: float = stage_default(train_from_layer, "guard_m"),
-              pixel_m: float | None = None, crs=None,
+@dataclass(frozen=True)
+class FineTuning:
+    """How :func:`train_job` fine-tunes the network (an ``.onnx`` output).
+
+    Attributes
+    ----------
+    base : str or Path, optional
+        The ``.onnx`` model to start from; the bundled one when None.
+    steps : int, optional
+        Optimiser steps; :data:`gisroads.learn.convnet.FINE_TUNE_STEPS` when None.
+    check_share : float
+        Share of the layer's roads left out to check the fine-tuned model against the
+        base (:func:`gisroads.learn.convnet_training.fine_tune_on_layer`).
+    """
+
+    base: object = None
+    steps: int | None = None
+    check_share: float = CHECK_SHARE
+
+
+def train_job(image_path, roads_path, out_path, labels: LayerLabels = LayerLabels(),
+              tuning: FineTuning = FineTuning(), *, pixel_m: float | None = None, crs=None,
               samples: int = stage_default(train_from_layer, "samples"),
               seed: int = stage_default(train_from_layer, "seed"),
-              base=None, steps: int | None = None, check_share: float = CHECK_SHARE,
-              progress: Progress = None) -> dict:
+              progress: Progress = None, **changes) -> dict:
     """Train a road model on an image from a road layer over it (the agency's update case).
 
-    An ``out_path`` ending in ``.onnx`` fine-tunes the convolutional network (``base``, the
-    bundled one by default, for ``steps`` optimiser steps:
+    An ``out_path`` ending in ``.onnx`` fine-tunes the convolutional network (``tuning``:
+    the ``base`` network, the bundled one by default, for ``steps`` optimiser steps:
     :func:`gisroads.learn.convnet_training.fine_tune_on_layer`; needs the ``train`` extra,
     PyTorch), with ``check_share`` of the roads left out to check it against the base
     network, which is written instead (with a warning) when it finds more of them; any other
-    suffix trains boosted trees, as follows.
+    suffix trains boosted trees, as follows. ``**changes`` change fields of ``labels`` or
+    ``tuning`` for this call.
 
     Roads (any OGR line layer or a GeoDataFrame, any CRS; a gisroads GeoPackage's
     road_centrelines) are
-    rasterised at their width (``width_field``, metres; empty or missing values and layers
-    without the field take ``width_m``): positives in the core half of each road, negatives
-    beyond ``width / 2 + guard_m`` (misregistered lines), calibrated to the bundled model's
+    rasterised at their width (``labels``: ``width_field``, metres; empty or missing values
+    and layers without the field take ``default_width_m``): positives in the core half of
+    each road, negatives beyond ``width / 2 + guard_m`` (misregistered lines), calibrated
+    to the bundled model's
     road share (:func:`gisroads.learn.train_from_layer` ``road_share="default"``), so that
     the extraction's threshold means the same for both models. Writes the model archive ``out_path``
     (.npz), to give to ``image_job(..., model=out_path)``. Needs scikit-learn.
     """
+    labels, tuning = with_changes(changes, labels, tuning)
+    width_field = labels.width_field
     image, _ = read_image(image_path, pixel_m=pixel_m, crs=crs)
     roads = _map_lines(roads_path)
     if roads.crs is None and image.crs is not None:
@@ -118,21 +140,19 @@ def train_job(image_path, roads_path, out_path, *, width_field: str | None = Non
     if width_field is not None and width_field not in roads.columns:
         raise GisroadsError(f"{roads_path}: no field {width_field!r} (fields: "
                          f"{', '.join(c for c in roads.columns if c != 'geometry')})")
-    if width_m <= 0 or guard_m < 0:
+    if labels.default_width_m <= 0 or labels.guard_m < 0:
         raise GisroadsError("the width must be positive and the guard band at least 0 m")
     if Path(out_path).suffix.lower() == ".onnx":
-        return _fine_tune_job(image, roads, out_path, image_path=image_path,
-                              roads_path=roads_path, width_field=width_field, width_m=width_m,
-                              guard_m=guard_m, seed=seed, base=base, steps=steps,
-                              check_share=check_share, progress=progress)
+        return _fine_tune_job(image, roads, out_path, labels, tuning, image_path=image_path,
+                              roads_path=roads_path, seed=seed, progress=progress)
     try:
         import sklearn  # noqa: F401  (optional: checked here to say what is missing)
     except ImportError:
         raise GisroadsError("training needs scikit-learn (pip install scikit-learn, or the "
                          "python3-sklearn package)") from None
     report(progress, 0.0, "sampling the image along the roads")
-    model = train_from_layer(image, roads, width_field=width_field, default_width_m=width_m,
-                             guard_m=guard_m, samples=samples, seed=seed, road_share="default",
+    model = train_from_layer(image, roads, labels,
+                             samples=samples, seed=seed, road_share="default",
                              progress=scaled(progress, 0.05, 0.95))
     model = with_metadata(model, image=Path(image_path).name, width_field=width_field,
                           roads=(Path(roads_path).name if not isinstance(
@@ -144,8 +164,8 @@ def train_job(image_path, roads_path, out_path, *, width_field: str | None = Non
             "roads": len(roads)}
 
 
-def _fine_tune_job(image, roads, out_path, *, image_path, roads_path, width_field, width_m,
-                   guard_m, seed, base, steps, check_share, progress) -> dict:
+def _fine_tune_job(image, roads, out_path, labels: LayerLabels, tuning: FineTuning, *,
+                   image_path, roads_path, seed, progress) -> dict:
     """The convolutional network fine-tuned on ``image`` with ``roads`` as labels, written
     as ONNX to ``out_path`` (see :func:`train_job`)."""
     try:
@@ -154,17 +174,18 @@ def _fine_tune_job(image, roads, out_path, *, image_path, roads_path, width_fiel
         raise GisroadsError("fine-tuning the road network needs PyTorch: "
                             "pip install 'gisroads[train]' (or train boosted trees: "
                             "-o model.npz)") from None
-    steps = FINE_TUNE_STEPS if steps is None else steps
+    steps = FINE_TUNE_STEPS if tuning.steps is None else tuning.steps
     if steps < 1:
         raise GisroadsError("the number of fine-tuning steps must be at least 1")
-    if not 0 <= check_share < 1:
+    if not 0 <= tuning.check_share < 1:
         raise GisroadsError(f"the share of roads left out to check the fine-tuning must be "
-                            f"at least 0 and below 1, not {check_share}")
-    model, metadata = fine_tune_on_layer(image, roads, model=base, width_field=width_field,
-                                         default_width_m=width_m, guard_m=guard_m,
-                                         steps=steps, seed=seed, check_share=check_share,
+                            f"at least 0 and below 1, not {tuning.check_share}")
+    model, metadata = fine_tune_on_layer(image, roads,
+                                         replace(labels, core_fraction=1.0),
+                                         model=tuning.base, steps=steps, seed=seed,
+                                         check_share=tuning.check_share,
                                          progress=scaled(progress, 0.0, 0.95))
-    metadata = {**metadata, "image": Path(image_path).name, "width_field": width_field,
+    metadata = {**metadata, "image": Path(image_path).name, "width_field": labels.width_field,
                 "roads": (Path(roads_path).name if not isinstance(roads_path, gpd.GeoDataFrame)
                           else "layer")}
     path = export_onnx(model, out_path, metadata)

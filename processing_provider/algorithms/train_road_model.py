@@ -36,8 +36,9 @@ class TrainRoadModel(GisroadsAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add_parameters(train_parameters(
-            self.tr, stage_default(train_job, "width_m"), stage_default(train_job, "guard_m"),
-            stage_default(train_job, "samples"), FINE_TUNE_STEPS, CHECK_SHARE))
+            self.tr, stage_default(train_job, "default_width_m"),
+            stage_default(train_job, "guard_m"), stage_default(train_job, "samples"),
+            FINE_TUNE_STEPS, CHECK_SHARE))
         self.addOutput(QgsProcessingOutputNumber("SAMPLES_USED",
                                                  self.tr("Samples used (boosted trees)")))
         self.addOutput(QgsProcessingOutputNumber("ROAD_SHARE",
@@ -53,7 +54,7 @@ class TrainRoadModel(GisroadsAlgorithm):
             result = train_job(
                 self.parameterAsRasterLayer(parameters, "IMAGE", context).source(), roads,
                 out, width_field=field,
-                width_m=self.parameterAsDouble(parameters, "WIDTH", context),
+                default_width_m=self.parameterAsDouble(parameters, "WIDTH", context),
                 guard_m=self.parameterAsDouble(parameters, "GUARD", context),
                 samples=self.parameterAsInt(parameters, "SAMPLES", context),
                 steps=self.parameterAsInt(parameters, "STEPS", context),
