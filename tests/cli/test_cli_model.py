@@ -79,8 +79,10 @@ def test_image_with_the_trained_model_finds_the_roads_and_writes_the_probability
     assert (lines["cues"].str.contains("model")).all()
     scores = json.loads(gisroads("evaluate", tmp_path / "roads.gpkg", folder / "truth.gpkg",
                                  "--json").stdout)["buffer"]
-    # measured completeness 0.64, correctness 0.91
-    assert scores["completeness"] > 0.5 and scores["correctness"] > 0.8
+    # measured completeness 0.62, correctness 0.80 in both environments (the trees averaged
+    # with the bundled network); the bundled network alone finds 0.58 / 0.78 on this scene,
+    # so the bounds ask for what the layer adds
+    assert scores["completeness"] > 0.6 and scores["correctness"] > 0.78
 
 
 def test_model_errors_are_one_line_and_write_nothing(scene, tmp_path):
