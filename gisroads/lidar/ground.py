@@ -92,7 +92,13 @@ class GroundPlanes:
     surfaces: pd.DataFrame
 
 
-def ground_planes(xyz, *, t_planar: float = 0.01, t_vert: float = 0.98,
+T_PLANAR = 0.01
+"""Planarity threshold of a ground cell's points (Zhu & Mordohai, Table 1)."""
+T_VERT = 0.98
+"""Verticality threshold of a ground plane's normal (Zhu & Mordohai, Table 1)."""
+
+
+def ground_planes(xyz, *, t_planar: float = T_PLANAR, t_vert: float = T_VERT,
                   max_step_m: float = 0.3, cell_m: float | None = None, block_m: float = 5.0,
                   min_cluster_points: int = 10, min_surface_area_m2: float = 1000.0,
                   min_clearance_m: float = 2.5, level_radius_m: float = 10.0,

@@ -49,7 +49,7 @@ from ..tiling.tilestore import (TileStore, code_fingerprint, digest, file_digest
                                 las_inputs, open_store)
 from .evidence import (CAR_PARK_FLANK_SHARE, FLANK_DEPTH_M, FLANK_GAP_M, SHORE_FLANK_SHARE,
                        dropout_cells, road_evidence, vehicle_cells, without_flanked_roads)
-from .ground import GroundPlanes, ground_planes
+from .ground import T_PLANAR, T_VERT, GroundPlanes, ground_planes
 from .learned import (evidence_features, fit_evidence_model, learned_likelihood,
                       load_evidence_model)
 from .hypotheses import (DEFAULT_LENGTHS_M, DEFAULT_WIDTHS_M, L_MAX, likelihood_maps,
@@ -158,7 +158,8 @@ def edges_and_segments(image: np.ndarray, *, n_segments: int = N_SEGMENTS
 
 def extract_tile(cloud: PointCloud, tile: Tile, *, cell_m: float = CELL_M,
                  widths_m=DEFAULT_WIDTHS_M, lengths_m=DEFAULT_LENGTHS_M,
-                 n_segments: int = N_SEGMENTS, t_planar: float = 0.01, t_vert: float = 0.98,
+                 n_segments: int = N_SEGMENTS, t_planar: float = T_PLANAR,
+                 t_vert: float = T_VERT,
                  progress: Progress = None) -> TileRoads:
     """Roads of one tile (Algorithm 1, steps 1-6) from the points inside its bounds.
 
@@ -251,9 +252,12 @@ class _TileJob:
     store: TileStore
     cue: str
     min_points: int
-    options: dict
+    cell_m: float
     results: Path
     """Folder of finished tiles."""
+    stages: LidarOptions | None = None
+    """Intensity cue: the options of its stages (``widths_m``, ``lengths_m``, ``n_segments``,
+    ``t_planar``, ``t_vert``) for :func:`extract_tile`."""
     references: object = None
     model: str | None = None
     """Evidence cue: an evidence model file (:mod:`gisroads.lidar.learned`) whose
@@ -292,10 +296,13 @@ def _run_tile(job: _TileJob, tile: Tile, progress: Progress = None):
     result = None
     if cloud is not None and len(cloud) >= job.min_points:
         if job.cue == "intensity":
-            result = extract_tile(cloud, tile, **job.options)
+            stages = job.stages
+            result = extract_tile(cloud, tile, cell_m=job.cell_m, widths_m=stages.widths_m,
+                                  lengths_m=stages.lengths_m, n_segments=stages.n_segments,
+                                  t_planar=stages.t_planar, t_vert=stages.t_vert)
         else:
             evidence = road_evidence(cloud, bounds=tile.bounds, references=job.references,
-                                     progress=progress, **job.options)
+                                     progress=progress, cell_m=job.cell_m)
             raster = (evidence.likelihood if job.model is None
                       else learned_likelihood(evidence, _evidence_model(job.model)))
             intensity = evidence.measures.get("intensity")
@@ -435,7 +442,7 @@ def _evidence_from_store(store: TileStore, *, cell_m, min_points, workers, sched
         cell_m = auto_cell_m(store.point_count, _covered_m2(tiles))
     key = {"cell_m": cell_m, "min_points": min_points, "features": features,
            "model": None if model is None else file_digest(model)}
-    job = _TileJob(store, "evidence", min_points, {"cell_m": cell_m},
+    job = _TileJob(store, "evidence", min_points, cell_m,
                    _results_folder(store, work_dir, "evidence", key), model=model,
                    features=features)
     # the first tile with enough points gives the references every other tile is scaled by
@@ -659,8 +666,8 @@ class LidarOptions:
     widths_m: tuple = DEFAULT_WIDTHS_M
     lengths_m: tuple = DEFAULT_LENGTHS_M
     n_segments: int = N_SEGMENTS
-    t_planar: float = 0.01
-    t_vert: float = 0.98
+    t_planar: float = T_PLANAR
+    t_vert: float = T_VERT
     threshold: float = EVIDENCE_THRESHOLD
     network_options: dict | None = None
     min_points: int = 1000
@@ -766,12 +773,7 @@ def extract_roads(path, options: LidarOptions = LidarOptions(),
                                scheduler=parallel.scheduler,
                                progress=scaled(progress, 0.0, 0.1))
             try:
-                stages = dict(widths_m=tuple(options.widths_m),
-                              lengths_m=tuple(options.lengths_m),
-                              n_segments=options.n_segments, t_planar=options.t_planar,
-                              t_vert=options.t_vert)
-                tiled = _intensity_roads(store, cell_m=options.cell_m,
-                                         min_points=options.min_points, options=stages,
+                tiled = _intensity_roads(store, options,
                                          progress=scaled(progress, 0.1, 0.95), **where)
             except BaseException:
                 if parallel.work_dir is None:
@@ -783,15 +785,19 @@ def extract_roads(path, options: LidarOptions = LidarOptions(),
         return tiled.in_memory(maps=tile_maps)
 
 
-def _intensity_roads(store: TileStore, *, cell_m, min_points: int, options: dict, workers,
-                     scheduler, work_dir, progress) -> TiledRoads:
+def _intensity_roads(store: TileStore, options: LidarOptions, *, workers, scheduler,
+                     work_dir, progress) -> TiledRoads:
     """The intensity cue's tiles run and their centre lines stitched into the network."""
     tiles = store.tiles
-    if cell_m is None:
-        cell_m = auto_cell_m(store.point_count, _covered_m2(tiles))
-    options = {"cell_m": cell_m, **options}
-    job = _TileJob(store, "intensity", min_points, options, _results_folder(
-        store, work_dir, "intensity", {**options, "min_points": min_points}))
+    cell_m = (auto_cell_m(store.point_count, _covered_m2(tiles)) if options.cell_m is None
+              else options.cell_m)
+    # the resume key: what changes a tile's result
+    key = {"cell_m": cell_m, "widths_m": tuple(options.widths_m),
+           "lengths_m": tuple(options.lengths_m), "n_segments": options.n_segments,
+           "t_planar": options.t_planar, "t_vert": options.t_vert,
+           "min_points": options.min_points}
+    job = _TileJob(store, "intensity", options.min_points, cell_m,
+                   _results_folder(store, work_dir, "intensity", key), stages=options)
     run: dict = {}
     finished = _run_tiles(job, tiles, workers=workers, scheduler=scheduler,
                           progress=progress, run=run)
