@@ -60,7 +60,7 @@ from gisroads.io.las import concatenate, read_las
 from gisroads.lidar.evidence import (KERB_GRADIENT, LANE_RADIUS_M, EvidenceRule, _cell_min,
                                      _disk, kerb_steps, median_cells, road_evidence,
                                      vehicle_cells, without_car_park_aisles)
-from gisroads.network.rasters import raster_to_network
+from gisroads.network.rasters import PartOptions, raster_to_network
 
 LIDAR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "lidar"
 TRUTH = LIDAR / "ground_truth"
@@ -168,7 +168,7 @@ def otsu(values) -> float:
 
 
 def network(likelihood, evidence, *, threshold=0.8, low=None, aisles=False):
-    options = {"low_threshold": low} if low is not None else None
+    options = PartOptions(low_threshold=low)
     net = raster_to_network(likelihood, threshold=threshold, part_options=options)
     if aisles and len(net.centrelines):
         cleared, found = without_car_park_aisles(likelihood, net.centrelines,

@@ -23,6 +23,8 @@ OPTIONS = [  # (module, options class, the function taking it)
     ("gisroads.network.junctions", "NetworkOptions", "strings_to_network"),
     ("gisroads.network.rasters", "PartOptions", "skeleton_parts"),
     ("gisroads.network.subgraph", "ContextOptions", "gap_context"),
+    ("gisroads.network.subgraph", "GapOptions", "gap_edges"),
+    ("gisroads.network.subgraph", "WeightOptions", "edge_weights"),
     ("gisroads.update.conflate", "MatchOptions", "conflate"),
 ]
 

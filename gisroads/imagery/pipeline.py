@@ -35,7 +35,7 @@ centre lines are, then one network stage (junctions, significance) over the whol
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -51,11 +51,11 @@ from ..progress import Progress, report, scaled
 from .cues import context_rasters, image_cues, valid_mask
 from .datasets import crop_raster
 from .grouping import group_segments
-from ..network.junctions import strings_to_network
-from .roadparts import extract_road_parts
+from ..network.junctions import NetworkOptions, strings_to_network
+from .roadparts import RoadPartCriteria, extract_road_parts
 from .segments import edge_strength, pixel_size_m, segment_image
 from ..parallel import pinned_threads
-from ..network.subgraph import link_road_parts
+from ..network.subgraph import GapOptions, WeightOptions, link_road_parts
 
 METHOD = "grote-rottensteiner"
 PROBABILITY_METHOD = "learned-probability"
@@ -318,11 +318,18 @@ class ImageOptions:
     n_segments : int, optional
         NCut over-segmentation size; default
         :func:`gisroads.imagery.segments.default_counts`.
-    road_part_criteria, gap_options, weight_options, network_options : dict, optional
-        Thresholds of :func:`gisroads.imagery.roadparts.filter_road_parts`,
-        :func:`gisroads.network.subgraph.gap_edges`,
-        :func:`gisroads.network.subgraph.edge_weights` and
-        :func:`gisroads.network.junctions.strings_to_network`.
+    road_part_criteria : RoadPartCriteria, optional
+        The papers' stages: the criteria of
+        :func:`gisroads.imagery.roadparts.filter_road_parts`; None: its defaults.
+    gap_options : GapOptions, optional
+        The papers' stages: the limits of a gap edge
+        (:func:`gisroads.network.subgraph.gap_edges`); None: its defaults.
+    weight_options : WeightOptions, optional
+        The papers' stages: the weights of the gap edges
+        (:func:`gisroads.network.subgraph.edge_weights`); None: its defaults.
+    network_options : NetworkOptions, optional
+        The papers' stages: the network generation
+        (:func:`gisroads.network.junctions.strings_to_network`); None: its defaults.
     adapt : bool
         Adapt boosted trees to the image from its own confident pixels first
         (scikit-learn).
@@ -345,10 +352,10 @@ class ImageOptions:
     method: str | None = None
     probability_threshold: float | None = None
     n_segments: int | None = None
-    road_part_criteria: dict | None = None
-    gap_options: dict | None = None
-    weight_options: dict | None = None
-    network_options: dict | None = None
+    road_part_criteria: RoadPartCriteria | None = None
+    gap_options: GapOptions | None = None
+    weight_options: WeightOptions | None = None
+    network_options: NetworkOptions | None = None
     adapt: bool = True
     context: object = "default"
     tile_px: int = TILE_PX
@@ -511,8 +518,9 @@ def _extract(image, options: ImageOptions, *, dsm, model, probability,
     base = 0.15 if "probability" in timings else 0.0
     progress = scaled(progress, base, 1.0)
     stages = dict(nir_band=nir_band, red_band=red_band, dsm=dsm, n_segments=options.n_segments,
-                  road_part_criteria=options.road_part_criteria,
-                  gap_options=options.gap_options, weight_options=options.weight_options)
+                  road_part_criteria=options.road_part_criteria or RoadPartCriteria(),
+                  gap_options=options.gap_options or GapOptions(),
+                  weight_options=options.weight_options or WeightOptions())
     tile_px = options.tile_px
     if max(image.shape) > 2 * tile_px:
         strings, qa, record, counts = _tiled_road_strings(
@@ -523,9 +531,10 @@ def _extract(image, options: ImageOptions, *, dsm, model, probability,
             image, probability, timings=timings, progress=scaled(progress, 0.0, 0.85),
             **stages)
     lap.restart()  # the tiled stages kept their own times
-    network, connections = strings_to_network(strings, extent=image.bounds, crs=image.crs,
-                                              method=METHOD, progress=scaled(progress, 0.85, 1.0),
-                                              **(options.network_options or {}))
+    network, connections = strings_to_network(strings,
+                                              options.network_options or NetworkOptions(),
+                                              extent=image.bounds, crs=image.crs, method=METHOD,
+                                              progress=scaled(progress, 0.85, 1.0))
     lap("network")
     network.centrelines["cues"] = record["cues"]
     network.qa = {**qa, "junction_connections": connections}
@@ -540,8 +549,9 @@ def _extract(image, options: ImageOptions, *, dsm, model, probability,
 
 
 def _road_strings(image: GeoRaster, probability: GeoRaster | None, *, nir_band, red_band,
-                  dsm, n_segments, road_part_criteria, gap_options, weight_options,
-                  timings: dict, progress: Progress):
+                  dsm, n_segments, road_part_criteria: RoadPartCriteria,
+                  gap_options: GapOptions, weight_options: WeightOptions, timings: dict,
+                  progress: Progress):
     """The papers' stages up to the road strings on one image (or tile): ``(strings, qa,
     cues record, counts)``; each stage's seconds are added to ``timings``."""
     lap = _StageClock(timings)
@@ -564,7 +574,7 @@ def _road_strings(image: GeoRaster, probability: GeoRaster | None, *, nir_band, 
     lap("grouping")
     parts = extract_road_parts(labels, image, cues=cues, edge_magnitude=edges,
                                progress=scaled(progress, 0.65, 0.88),
-                               **(road_part_criteria or {}))
+                               **asdict(road_part_criteria))
     lap("road_parts")
     context = context_rasters(cues)
     if cues.probability is not None:

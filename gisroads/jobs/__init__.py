@@ -6,11 +6,11 @@ One module per method (:mod:`.lidar`, :mod:`.imagery`, :mod:`.snakes`, :mod:`.ne
 inputs they read, :func:`network_summary`, the no-road warning). Every job is importable
 from here.
 """
-import dataclasses
 import inspect
 import math
 
 from ..errors import GisroadsError
+from ..options import keyword_defaults
 from .common import (VECTOR_SUFFIXES, describe_file, network_summary, parse_metres,
                      read_image, stage_default)
 from .demo import DEMO_CLOUD, DEMO_IMAGE, DEMO_IMAGE_TRUTH, demo_job
@@ -33,28 +33,13 @@ JOBS = {function.__name__: function for function in (
 """The jobs by name, for ``gisroads job NAME`` (the QGIS algorithms' external-tool mode)."""
 
 
-def _keywords(function) -> dict:
-    """``{keyword: default}`` of everything ``function`` takes by keyword: its parameters
-    (``inspect.Parameter.empty`` where there is no default), and in place of an options
-    object (a dataclass default, its fields changed through ``**changes``) its fields."""
-    keywords = {}
-    for parameter in inspect.signature(function).parameters.values():
-        if parameter.kind is inspect.Parameter.VAR_KEYWORD:
-            continue
-        if dataclasses.is_dataclass(parameter.default):
-            keywords.update({field.name: getattr(parameter.default, field.name)
-                             for field in dataclasses.fields(parameter.default)})
-        else:
-            keywords[parameter.name] = parameter.default
-    return keywords
-
-
 def job_defaults(name: str) -> dict:
     """``{keyword: default}`` of the job ``name`` (those with a default, ``progress``
     excepted; the fields of an options object one by one), as JSON takes them: tuples as
     lists, also inside mappings. An infinite default (no limit) has no JSON form and is left
     out."""
-    return {keyword: _as_json(default) for keyword, default in _keywords(JOBS[name]).items()
+    return {keyword: _as_json(default)
+            for keyword, default in keyword_defaults(JOBS[name]).items()
             if default is not inspect.Parameter.empty and keyword != "progress"
             and not (isinstance(default, float) and not math.isfinite(default))}
 
@@ -73,7 +58,7 @@ def run_job(name: str, arguments: dict, progress=None) -> dict:
     if name not in JOBS:
         raise GisroadsError(f"no job {name!r}; the jobs: {', '.join(sorted(JOBS))}")
     function = JOBS[name]
-    unknown = set(arguments) - set(_keywords(function))
+    unknown = set(arguments) - set(keyword_defaults(function))
     if unknown:
         raise GisroadsError(f"{name} takes no {', '.join(sorted(unknown))}")
     if "progress" in inspect.signature(function).parameters:

@@ -3,7 +3,6 @@ a layer), the summary of a written road network, its quick-look, the no-road war
 the header facts of ``gisroads info``."""
 from __future__ import annotations
 
-import dataclasses
 import inspect
 import warnings
 from pathlib import Path
@@ -18,6 +17,7 @@ from ..io.las import las_info
 from ..io.quicklook import write_quicklook
 from ..io.raster import raster_info, read_raster
 from ..io.vector import layer_geometry_types, list_layers, read_layer, write_geopackage
+from ..options import keyword_defaults
 
 VECTOR_SUFFIXES = {".gpkg", ".geojson", ".json", ".shp", ".fgb", ".kml", ".gml"}
 
@@ -26,7 +26,8 @@ def stage_default(function, parameter: str):
     """The default of ``parameter`` of the stage ``function``: the one place a default is
     written, read by the jobs, the command line and the QGIS algorithms. A parameter of the
     signature, or a field of its default options object (a dataclass, e.g.
-    :class:`gisroads.lidar.hypotheses.HypothesisOptions`).
+    :class:`gisroads.lidar.hypotheses.HypothesisOptions`; see
+    :func:`gisroads.options.keyword_defaults`).
 
     Examples
     --------
@@ -35,12 +36,12 @@ def stage_default(function, parameter: str):
     >>> stage_default(road_hypotheses, "t_bd") == T_BD
     True
     """
+    defaults = keyword_defaults(function)
+    if parameter in defaults:
+        return defaults[parameter]
     parameters = inspect.signature(function).parameters
-    if parameter in parameters:
+    if parameter in parameters:  # an options object itself, or **changes
         return parameters[parameter].default
-    for options in (p.default for p in parameters.values()):
-        if dataclasses.is_dataclass(options) and hasattr(options, parameter):
-            return getattr(options, parameter)
     raise KeyError(f"{function.__name__} has no parameter {parameter!r}")
 
 

@@ -20,7 +20,7 @@ from ..imagery.roadparts import extract_road_parts, rasterize_segments
 from ..imagery.segments import frame_to_labels, segment_image, segments_to_frame
 from ..io.vector import write_geopackage
 from ..io.raster import read_raster, write_geotiff
-from ..learn.convnet import CHECK_SHARE, FINE_TUNE_STEPS
+from ..learn.convnet import CHECK_SHARE, FINE_TUNE_CORE_FRACTION, FINE_TUNE_STEPS
 from ..learn.model import save_model, with_metadata
 from ..learn.training import LayerLabels, train_from_layer
 from ..options import with_changes
@@ -181,7 +181,7 @@ def _fine_tune_job(image, roads, out_path, labels: LayerLabels, tuning: FineTuni
         raise GisroadsError(f"the share of roads left out to check the fine-tuning must be "
                             f"at least 0 and below 1, not {tuning.check_share}")
     model, metadata = fine_tune_on_layer(image, roads,
-                                         replace(labels, core_fraction=1.0),
+                                         replace(labels, core_fraction=FINE_TUNE_CORE_FRACTION),
                                          model=tuning.base, steps=steps, seed=seed,
                                          check_share=tuning.check_share,
                                          progress=scaled(progress, 0.0, 0.95))

@@ -3,7 +3,7 @@ network stages of the imagery method alone: subgraph linking of road parts, and 
 construction of any line layer."""
 from __future__ import annotations
 
-from dataclasses import asdict, replace
+from dataclasses import replace
 from pathlib import Path
 
 from ..errors import GisroadsError
@@ -12,7 +12,8 @@ from ..io.raster import read_raster
 from ..io.vector import write_geopackage
 from ..network.junctions import NetworkOptions, road_strings_from_lines, strings_to_network
 from ..network.rasters import THRESHOLD, raster_to_network
-from ..network.subgraph import GapOptions, edge_weights, link_road_parts, road_strings
+from ..network.subgraph import (GapOptions, WeightOptions, edge_weights, link_road_parts,
+                                road_strings)
 from ..progress import Progress, report, scaled
 from .common import (_layer, _network_quicklook, _warn_if_no_road, _write_network,
                      network_summary, read_image, stage_default)
@@ -72,9 +73,9 @@ def linking_job(road_parts, linked_path, gaps: GapOptions = GapOptions(), *,
     in the parts' CRS. ``edited_gap_edges``: a ``gap_edges`` layer of an earlier run, its
     ``selected`` edited by hand: the strings then follow it and nothing is recomputed.
     ``gaps`` (and ``**changes`` to its fields): the limits of a gap edge
-    (:func:`gisroads.network.subgraph.gap_edges`); ``small_gap_m``: of
-    :func:`gisroads.network.subgraph.edge_weights`. Writes ``linked_path`` (GeoPackage):
-    ``gap_edges`` and ``road_strings``.
+    (:func:`gisroads.network.subgraph.gap_edges`); ``small_gap_m``: of the gap edges'
+    weights (:class:`gisroads.network.subgraph.WeightOptions`, its other fields at their
+    defaults). Writes ``linked_path`` (GeoPackage): ``gap_edges`` and ``road_strings``.
     """
     parts = _layer(road_parts, "road_parts")
     if edited_gap_edges is not None:
@@ -83,8 +84,8 @@ def linking_job(road_parts, linked_path, gaps: GapOptions = GapOptions(), *,
     else:
         edges, strings = link_road_parts(
             parts, **_gap_context(parts.crs, image_path, dsm_path, nir_band, red_band),
-            gap_options=asdict(replace(gaps, **changes)),
-            weight_options={"small_gap_m": small_gap_m}, progress=progress)
+            gap_options=replace(gaps, **changes),
+            weight_options=WeightOptions(small_gap_m=small_gap_m), progress=progress)
     write_geopackage(linked_path, {"gap_edges": edges, "road_strings": strings})
     return {"linked": Path(linked_path), "gap_edges": len(edges),
             "selected": int(edges["selected"].fillna(False).astype(bool).sum()),

@@ -49,6 +49,10 @@ CHECK_SHARE = 0.2
 """Share of a road layer's length (whole roads, seeded) that
 :func:`gisroads.learn.convnet_training.fine_tune_on_layer` leaves out of the training, to
 check the fine-tuned model against the base model on them."""
+FINE_TUNE_CORE_FRACTION = 1.0
+"""``core_fraction`` of the labels :func:`gisroads.learn.convnet_training.fine_tune_on_layer`
+teaches (:class:`gisroads.learn.training.LayerLabels`): the whole width of a road is road,
+since the network draws road surfaces (taught the core half, it learns to miss roads)."""
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,8 @@ except ImportError as error:  # pragma: no cover - the message is the point
 
 from ..errors import GisroadsError
 from ..progress import Progress, report, scaled
-from .convnet import CHECK_SHARE, FINE_TUNE_STEPS, network_input, normalisation
+from .convnet import (CHECK_SHARE, FINE_TUNE_CORE_FRACTION, FINE_TUNE_STEPS, network_input,
+                      normalisation)
 from .training import LayerLabels
 
 WIDTHS = (16, 32, 64, 128, 192)
@@ -477,7 +478,8 @@ def _check(probabilities: dict, grid, valid: np.ndarray, roads, threshold: float
     return found
 
 
-def fine_tune_on_layer(image, roads, labels: LayerLabels = LayerLabels(core_fraction=1.0),
+def fine_tune_on_layer(image, roads,
+                       labels: LayerLabels = LayerLabels(core_fraction=FINE_TUNE_CORE_FRACTION),
                        *, model=None, steps: int = FINE_TUNE_STEPS,
                        learning_rate: float = 3e-4, off_layer: str = "base",
                        check_share: float = CHECK_SHARE, seed: int = 0,

@@ -155,7 +155,7 @@ FILL_SIGMA_M = 16.0
 """Widest Gaussian (sigma, metres) that fills the terrain under buildings; beyond it the
 nearest ground."""
 #: Likelihood of a paved cell for the ``kerbs`` cue: the network stage's low threshold
-#: (``gisroads.lidar.pipeline.EVIDENCE_NETWORK_OPTIONS``).
+#: (``gisroads.lidar.pipeline.EVIDENCE_PARTS`` takes it from here).
 PAVED_LIKELIHOOD = 0.6
 #: A carriageway holds a disk of this radius once its kerbs are out, metres.
 LANE_RADIUS_M = 1.5

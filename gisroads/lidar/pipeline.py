@@ -43,12 +43,15 @@ from ..parallel import (NOT_KEPT, Parallel, for_each_result, keep_result, kept_r
 from ..progress import Progress, report, scaled
 from ..segmentation.ncut import ncut_segmentation
 from ..network.branches import branches_into
-from ..network.rasters import raster_to_network, without_lines
+from ..network.junctions import NetworkOptions
+from ..network.rasters import PartOptions, raster_to_network, without_lines
+from ..network.subgraph import GapOptions, WeightOptions
 from ..tiling.tiles import OVERLAP_M, TILE_M, Tile, stitch_tiles
 from ..tiling.tilestore import (TileStore, code_fingerprint, digest, file_digest, inputs_crs,
                                 las_inputs, open_store)
-from .evidence import (CAR_PARK_FLANK_SHARE, FLANK_DEPTH_M, FLANK_GAP_M, SHORE_FLANK_SHARE,
-                       dropout_cells, road_evidence, vehicle_cells, without_flanked_roads)
+from .evidence import (CAR_PARK_FLANK_SHARE, FLANK_DEPTH_M, FLANK_GAP_M, PAVED_LIKELIHOOD,
+                       SHORE_FLANK_SHARE, dropout_cells, road_evidence, vehicle_cells,
+                       without_flanked_roads)
 from .ground import T_PLANAR, T_VERT, GroundPlanes, ground_planes
 from .learned import (evidence_features, fit_evidence_model, learned_likelihood,
                       load_evidence_model)
@@ -65,10 +68,12 @@ CUES = ("intensity", "evidence")
 #: Likelihood at which an evidence cell is road: the combined cues must all agree, since
 #: paved non-road surfaces (car parks, footpaths) score as road on every per-cell cue.
 EVIDENCE_THRESHOLD = 0.8
-#: The network stage on the evidence: weak cells (0.6) joined to strong ones count as road
+#: The road parts of the evidence (the network stage's
+#: :class:`gisroads.network.rasters.PartOptions`): weak cells (0.6,
+#: :data:`gisroads.lidar.evidence.PAVED_LIKELIHOOD`) joined to strong ones count as road
 #: (hysteresis, as Canny's edge thresholds), so a road stays whole through a stretch its
 #: cues doubt and weak patches alone stay out (``bench/lidar_evidence_network.py``).
-EVIDENCE_NETWORK_OPTIONS = {"part_options": {"low_threshold": 0.6}}
+EVIDENCE_PARTS = PartOptions(low_threshold=PAVED_LIKELIHOOD)
 #: The same hysteresis for an evidence model's probability: its low threshold is this
 #: share of the model's threshold (as 0.6 is of 0.8).
 LOW_SHARE = 0.75
@@ -472,23 +477,36 @@ def _evidence_from_store(store: TileStore, *, cell_m, min_points, workers, sched
     return EvidenceMosaic(*band[:3], used, missing, band[3] if features else None)
 
 
-def _evidence_roads(path, *, threshold: float, network_options: dict | None, model,
-                    progress: Progress, **raster_options) -> LidarRoads:
+def _evidence_network(options: LidarOptions, threshold: float, model):
+    """:func:`raster_to_network` at ``threshold`` with the evidence cue's stages: those of
+    ``options``, None taking the defaults (the road parts :data:`EVIDENCE_PARTS`, with a
+    model its low threshold :data:`LOW_SHARE` of the model's ``threshold``)."""
+    parts = options.part_options
+    if parts is None:
+        parts = (EVIDENCE_PARTS if model is None
+                 else replace(EVIDENCE_PARTS, low_threshold=LOW_SHARE * threshold))
+    stages = {name: getattr(options, name)
+              for name in ("gap_options", "weight_options", "network_options")
+              if getattr(options, name) is not None}
+    return partial(raster_to_network, threshold=threshold, method=EVIDENCE_METHOD,
+                   part_options=parts, **stages)
+
+
+def _evidence_roads(path, options: LidarOptions, *, model, progress: Progress,
+                    **raster_options) -> LidarRoads:
     working, source = inputs_crs(las_inputs(path))
     run: dict = {}
     likelihood, flanks, intensity, used, _, _ = evidence_raster(
         path, progress=scaled(progress, 0.0, 0.6), _run=run, model=model, **raster_options)
+    threshold = options.threshold
     if model is not None:
         threshold = float(load_evidence_model(model).metadata["threshold"])
         used = {**used, "model": f"learned from a road layer ({Path(model).name})"}
-        network_options = {"part_options": {"low_threshold": LOW_SHARE * threshold},
-                           **(network_options or {})}
     if likelihood is None:
         network = lines_to_network(_no_lines(working), method=EVIDENCE_METHOD)
     else:
-        options = {**EVIDENCE_NETWORK_OPTIONS, **(network_options or {})}
-        network = raster_to_network(likelihood, threshold=threshold, method=EVIDENCE_METHOD,
-                                    progress=scaled(progress, 0.6, 0.8), **options)
+        network_stage = _evidence_network(options, threshold, model)
+        network = network_stage(likelihood, progress=scaled(progress, 0.6, 0.8))
         # car-park aisles are known by the cars that line them, shores (and the rims of
         # clearings around ponds) by the pulse dropouts of the water: out, and the network
         # again
@@ -499,16 +517,12 @@ def _evidence_roads(path, *, threshold: float, network_options: dict | None, mod
             {"car-park aisle": (vehicles, CAR_PARK_FLANK_SHARE),
              "shore": (dropouts, SHORE_FLANK_SHARE)})
         if len(taken):
-            network = raster_to_network(likelihood, threshold=threshold,
-                                        method=EVIDENCE_METHOD,
-                                        progress=scaled(progress, 0.8, 0.9), **options)
+            network = network_stage(likelihood, progress=scaled(progress, 0.8, 0.9))
         aisles = taken.query("reason == 'car-park aisle'")
         likelihood, accesses = without_car_park_accesses(likelihood, network.centrelines,
                                                          aisles)
         if len(accesses):
-            network = raster_to_network(likelihood, threshold=threshold,
-                                        method=EVIDENCE_METHOD,
-                                        progress=scaled(progress, 0.9, 1.0), **options)
+            network = network_stage(likelihood, progress=scaled(progress, 0.9, 1.0))
         network.qa[SERVICE_CENTRELINES] = service_lines(pd.concat([aisles, accesses]))
     network.qa.setdefault(SERVICE_CENTRELINES, service_lines(network.centrelines.iloc[:0]))
     report(progress, 1.0, f"{len(network.centrelines)} roads, {len(network.junctions)} "
@@ -651,9 +665,21 @@ class LidarOptions:
         Image cell, metres; by default :func:`auto_cell_m` of the cloud.
     threshold : float
         ``cue="evidence"``: likelihood at which a cell is road (a model brings its own).
-    network_options : dict, optional
-        ``cue="evidence"``: keyword arguments of
-        :func:`gisroads.network.rasters.raster_to_network`.
+    part_options : PartOptions, optional
+        ``cue="evidence"``: the road parts of the likelihood
+        (:func:`gisroads.network.rasters.skeleton_parts`); None: :data:`EVIDENCE_PARTS`
+        (hysteresis down to 0.6), with a model its low threshold :data:`LOW_SHARE` of the
+        model's threshold. One given is taken as it is (its ``low_threshold`` None: no
+        hysteresis).
+    gap_options : GapOptions, optional
+    weight_options : WeightOptions, optional
+    network_options : NetworkOptions, optional
+        ``cue="evidence"``: the gap edges, their weights and the network generation of
+        :func:`gisroads.network.rasters.raster_to_network`; None: its defaults
+        (:data:`gisroads.network.rasters.RASTER_GAPS`, ``RASTER_WEIGHTS``,
+        ``RASTER_NETWORK``). One given replaces the default whole: change a field of the
+        default with :func:`dataclasses.replace`, e.g.
+        ``replace(RASTER_NETWORK, max_unsupported_m=30.0)``.
     min_points : int
         Tiles with fewer points are skipped.
     """
@@ -669,7 +695,10 @@ class LidarOptions:
     t_planar: float = T_PLANAR
     t_vert: float = T_VERT
     threshold: float = EVIDENCE_THRESHOLD
-    network_options: dict | None = None
+    part_options: PartOptions | None = None
+    gap_options: GapOptions | None = None
+    weight_options: WeightOptions | None = None
+    network_options: NetworkOptions | None = None
     min_points: int = 1000
 
 
@@ -758,8 +787,7 @@ def extract_roads(path, options: LidarOptions = LidarOptions(),
         load_evidence_model(model)  # refused before any work
     with shared_workers():  # one cluster for the reading pass and the tiles
         if cue == "evidence":
-            roads = _evidence_roads(path, threshold=options.threshold,
-                                    network_options=options.network_options, model=model,
+            roads = _evidence_roads(path, options, model=model,
                                     progress=progress, tile_m=options.tile_m,
                                     overlap_m=options.overlap_m, cell_m=options.cell_m,
                                     min_points=options.min_points, **where)

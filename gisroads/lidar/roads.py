@@ -15,22 +15,25 @@ is not extended across a block to the next road.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import geopandas as gpd
 import numpy as np
 import shapely
 
 from ..geo import RoadNetwork
-from ..network.rasters import NETWORK_OPTIONS, parts_to_network
+from ..network.junctions import NetworkOptions
+from ..network.rasters import RASTER_NETWORK, parts_to_network
 from ..progress import Progress
 from ..vectorize.ribbons import JOIN_GAP_M, chain_lines, rectangle_centrelines
 
 METHOD = "zhu-mordohai"
-#: The network stage's options for rectangles: an end reaching past a crossing road by its
-#: half width plus the chaining distance (5 m) ends there, as rectangles overshoot a
-#: junction by up to their sliding step; a connection outside the rectangles (grown 2 m)
-#: over more than 15 m is refused (measured on fusa and the synthetic scenes).
-RECTANGLE_NETWORK_OPTIONS = {**NETWORK_OPTIONS, "overshoot_m": JOIN_GAP_M,
-                             "max_unsupported_m": 15.0}
+#: The network stage's options for rectangles (a raster's,
+#: :data:`gisroads.network.rasters.RASTER_NETWORK`, but): an end reaching past a crossing
+#: road by its half width plus the chaining distance (5 m) ends there, as rectangles
+#: overshoot a junction by up to their sliding step; a connection outside the rectangles
+#: (grown 2 m) over more than 15 m is refused (measured on fusa and the synthetic scenes).
+RECTANGLE_NETWORK = replace(RASTER_NETWORK, overshoot_m=JOIN_GAP_M, max_unsupported_m=15.0)
 SUPPORT_MARGIN_M = 2.0
 
 
@@ -66,7 +69,7 @@ def _off_surface_length(surface):
 
 def lines_to_network(lines: gpd.GeoDataFrame, *, extent=None, method: str = METHOD,
                      support_margin_m: float = SUPPORT_MARGIN_M,
-                     network_options: dict | None = None,
+                     network_options: NetworkOptions = RECTANGLE_NETWORK,
                      progress: Progress = None) -> RoadNetwork:
     """Centre lines of road rectangles to the road network (module docstring).
 
@@ -82,9 +85,10 @@ def lines_to_network(lines: gpd.GeoDataFrame, *, extent=None, method: str = METH
         The ``method`` of every centre line.
     support_margin_m : float
         The road surface grown by this much supports a junction connection, metres.
-    network_options : dict, optional
-        Keyword arguments of :func:`gisroads.network.junctions.strings_to_network`
-        (updating :data:`RECTANGLE_NETWORK_OPTIONS`).
+    network_options : NetworkOptions
+        Junctions, duplicates and significance
+        (:func:`gisroads.network.junctions.strings_to_network`); default
+        :data:`RECTANGLE_NETWORK`. Its ``unsupported`` is the rectangles' surface.
     progress : callable, optional
 
     Returns
@@ -104,9 +108,7 @@ def lines_to_network(lines: gpd.GeoDataFrame, *, extent=None, method: str = METH
     parts["quality"] = np.clip(np.nan_to_num(parts["score"].to_numpy(float), nan=1.0), 0, 1)
     return parts_to_network(parts, extent=tuple(extent), crs=lines.crs, method=method,
                             unsupported=_off_surface_length(surface),
-                            network_options={**RECTANGLE_NETWORK_OPTIONS,
-                                             **(network_options or {})},
-                            progress=progress)
+                            network_options=network_options, progress=progress)
 
 
 def rectangles_to_roads(rectangles: gpd.GeoDataFrame, *, method: str = METHOD,

@@ -15,8 +15,8 @@ Below the methods and above the vectorisers, so no method imports another:
     Any road raster (a mask or a probability map) to road parts and, through the two stages
     above, to the network contract.
 
-The entry point is :func:`raster_to_network`; its stages and the network generation are
-importable from here too, each from its module on first use, so that
+The entry point is :func:`raster_to_network`; its stages, the network generation and their
+options objects are importable from here too, each from its module on first use, so that
 ``import gisroads.network`` stays cheap.
 """
 from typing import TYPE_CHECKING
@@ -24,15 +24,16 @@ from typing import TYPE_CHECKING
 from .. import _lazy_exports
 
 __all__ = [
-    "NetworkOptions", "PartOptions", "link_gaps", "link_road_parts", "parts_to_network",
-    "raster_to_network", "road_mask", "road_probability", "skeleton_parts",
-    "strings_to_network",
+    "ContextOptions", "GapOptions", "NetworkOptions", "PartOptions", "WeightOptions",
+    "link_gaps", "link_road_parts", "parts_to_network", "raster_to_network", "road_mask",
+    "road_probability", "skeleton_parts", "strings_to_network",
 ]
 
 __getattr__, __dir__ = _lazy_exports(__name__, {
     **dict.fromkeys(["PartOptions", "link_gaps", "parts_to_network", "raster_to_network",
                      "road_mask", "road_probability", "skeleton_parts"], ".rasters"),
-    "link_road_parts": ".subgraph",
+    **dict.fromkeys(["ContextOptions", "GapOptions", "WeightOptions", "link_road_parts"],
+                    ".subgraph"),
     **dict.fromkeys(["NetworkOptions", "strings_to_network"], ".junctions"),
 })
 
@@ -40,4 +41,4 @@ if TYPE_CHECKING:
     from .junctions import NetworkOptions, strings_to_network
     from .rasters import (PartOptions, link_gaps, parts_to_network, raster_to_network,
                           road_mask, road_probability, skeleton_parts)
-    from .subgraph import link_road_parts
+    from .subgraph import ContextOptions, GapOptions, WeightOptions, link_road_parts

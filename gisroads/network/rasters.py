@@ -66,8 +66,9 @@ from ..vectorize.ribbons import node_roads
 from ..vectorize.skeleton import skeleton_lines
 from .areas import WIDE_AREA_M, lines_in_wide_areas, wide_paved_areas
 from .cuts import MAX_CUT_M, bridge_cuts
-from .junctions import merge_close_junctions, strings_to_network
-from .subgraph import edge_weights, gap_edges, road_strings, select_gap_edges
+from .junctions import NetworkOptions, merge_close_junctions, strings_to_network
+from .subgraph import (GapOptions, WeightOptions, edge_weights, gap_edges, road_strings,
+                       select_gap_edges)
 
 METHOD = "road-raster"
 #: Pixels at or above this probability are road.
@@ -97,20 +98,23 @@ MIN_ELONGATION = 2.0
 #: Tiles of this many pixels a side, with this much context on each side.
 TILE_PX = 2048
 OVERLAP_PX = 128
-#: Gap edges between dead ends: as the imagery's subgraph generation, with a lateral offset
-#: allowed up to a road's width (a cut road's two ends are skeletonised independently).
-GAP_OPTIONS = {"max_gap_m": 40.0, "max_direction_diff_rad": np.radians(35.0),
-               "max_lateral_offset_m": 5.0}
+#: Gap edges between dead ends (:func:`link_gaps`): as the imagery's subgraph generation,
+#: with directions within 35 degrees and a lateral offset allowed up to a road's width (a
+#: cut road's two ends are skeletonised independently), metres.
+RASTER_GAPS = GapOptions(max_gap_m=40.0, max_direction_diff_rad=np.radians(35.0),
+                         max_lateral_offset_m=5.0)
 
-#: Weight ranges of the gap edges: widths measured on a raster vary more along a road than
-#: a road part's (a part's mean width falls where it ends at a cut or bends), so a width
-#: difference weighs 0 only at 10 m.
-WEIGHT_OPTIONS = {"weight_ranges": {"width_diff_m": (0.0, 10.0)}}
+#: Weights of the gap edges (:func:`link_gaps`): widths measured on a raster vary more along
+#: a road than a road part's (a part's mean width falls where it ends at a cut or bends), so
+#: a width difference weighs 0 only at 10 m.
+RASTER_WEIGHTS = WeightOptions(weight_ranges={"width_diff_m": (0.0, 10.0)})
 
-#: Junction search radii of roads of quality 0 and 1, metres: wider than the imagery's
-#: defaults, since a raster's road ends retreat from a cut by half the road's width.
-NETWORK_OPTIONS = {"min_search_radius_m": 15.0, "max_search_radius_m": 45.0,
-                   "max_unsupported_m": 20.0}
+#: The network generation of a raster's roads (:func:`parts_to_network`): junction search
+#: radii of roads of quality 0 and 1 wider than the imagery's defaults (15 and 45 m), since
+#: a raster's road ends retreat from a cut by half the road's width; a junction connection
+#: running over more than 20 m off the road is refused.
+RASTER_NETWORK = NetworkOptions(min_search_radius_m=15.0, max_search_radius_m=45.0,
+                                max_unsupported_m=20.0)
 
 _SEAM_SNAP_PX = 1.5
 
@@ -487,7 +491,7 @@ def _free_ends(parts: gpd.GeoDataFrame) -> np.ndarray:
 
 
 def link_gaps(parts: gpd.GeoDataFrame, probability: GeoRaster | None = None, *,
-              gap_options: dict | None = None, weight_options: dict | None = None
+              gap_options: GapOptions = RASTER_GAPS, weight_options: WeightOptions = RASTER_WEIGHTS
               ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
     """Bridge gaps between dead ends (see the module docstring).
 
@@ -497,10 +501,12 @@ def link_gaps(parts: gpd.GeoDataFrame, probability: GeoRaster | None = None, *,
         From :func:`skeleton_parts`.
     probability : GeoRaster, optional
         The road probability; its mean along a gap is the gap's context (``occlusion``).
-    gap_options, weight_options : dict, optional
-        Keyword arguments of :func:`gisroads.network.subgraph.gap_edges` (defaults
-        :data:`GAP_OPTIONS`) and :func:`gisroads.network.subgraph.edge_weights` (default
-        :data:`WEIGHT_OPTIONS`).
+    gap_options : GapOptions
+        The limits of a gap edge (:func:`gisroads.network.subgraph.gap_edges`); default
+        :data:`RASTER_GAPS`.
+    weight_options : WeightOptions
+        The weights of the gap edges (:func:`gisroads.network.subgraph.edge_weights`);
+        default :data:`RASTER_WEIGHTS`.
 
     Returns
     -------
@@ -509,7 +515,7 @@ def link_gaps(parts: gpd.GeoDataFrame, probability: GeoRaster | None = None, *,
     strings : GeoDataFrame
         Parts chained through the selected gaps (:func:`gisroads.network.subgraph.road_strings`).
     """
-    gaps = gap_edges(parts, **{**GAP_OPTIONS, **(gap_options or {})})
+    gaps = gap_edges(parts, gap_options)
     if len(gaps):
         free = _free_ends(parts)
         row = pd.Series(np.arange(len(parts)), index=parts["part_id"].to_numpy())
@@ -522,7 +528,7 @@ def link_gaps(parts: gpd.GeoDataFrame, probability: GeoRaster | None = None, *,
                              if len(gaps) else np.empty(0))
         for kind in ("building", "vehicle", "tree", "vegetated_area", "shadow", "asphalt"):
             gaps[f"n_{kind}"] = 0.0
-    gaps = select_gap_edges(edge_weights(gaps, **(weight_options or WEIGHT_OPTIONS)))
+    gaps = select_gap_edges(edge_weights(gaps, weight_options))
     return gaps, road_strings(parts, gaps)
 
 
@@ -608,8 +614,9 @@ def _clip_to_extent(network: RoadNetwork, extent) -> None:
 
 def parts_to_network(parts: gpd.GeoDataFrame, *, extent, crs, method: str = METHOD,
                      observed=None, probability: GeoRaster | None = None, unsupported=None,
-                     gap_options: dict | None = None, weight_options: dict | None = None,
-                     network_options: dict | None = None,
+                     gap_options: GapOptions = RASTER_GAPS,
+                     weight_options: WeightOptions = RASTER_WEIGHTS,
+                     network_options: NetworkOptions = RASTER_NETWORK,
                      progress: Progress = None) -> RoadNetwork:
     """Road parts (centre lines of road pieces, from a raster or from any other cue) to
     the road-network contract: the network stage every method ends in.
@@ -639,12 +646,17 @@ def parts_to_network(parts: gpd.GeoDataFrame, *, extent, crs, method: str = METH
         A road probability raster: the context of the gap edges (see :func:`link_gaps`).
     unsupported : callable, optional
         ``unsupported(lines) -> metres`` of each candidate junction connection that the cue
-        does not show as road (see :func:`gisroads.network.junctions.find_junctions`).
-    gap_options, weight_options : dict, optional
-        See :func:`link_gaps`.
-    network_options : dict, optional
-        Keyword arguments of :func:`gisroads.network.junctions.strings_to_network`
-        (updating :data:`NETWORK_OPTIONS`).
+        does not show as road (see :func:`gisroads.network.junctions.find_junctions`); in
+        place of ``network_options.unsupported`` when given.
+    gap_options : GapOptions
+        See :func:`link_gaps`; default :data:`RASTER_GAPS`.
+    weight_options : WeightOptions
+        See :func:`link_gaps`; default :data:`RASTER_WEIGHTS`.
+    network_options : NetworkOptions
+        Junctions, duplicates and significance
+        (:func:`gisroads.network.junctions.strings_to_network`); default
+        :data:`RASTER_NETWORK` (change it with :func:`dataclasses.replace`, e.g.
+        ``replace(RASTER_NETWORK, max_unsupported_m=np.inf)``).
     progress : callable, optional
 
     Returns
@@ -656,10 +668,10 @@ def parts_to_network(parts: gpd.GeoDataFrame, *, extent, crs, method: str = METH
     gaps, strings = link_gaps(parts, probability, gap_options=gap_options,
                               weight_options=weight_options)
     strings, blobs = drop_blobs(strings)
-    network, _ = strings_to_network(strings, extent=extent, crs=crs, method=method,
-                                    progress=scaled(progress, 0.25, 0.95),
-                                    unsupported=unsupported,
-                                    **{**NETWORK_OPTIONS, **(network_options or {})})
+    if unsupported is not None:
+        network_options = replace(network_options, unsupported=unsupported)
+    network, _ = strings_to_network(strings, network_options, extent=extent, crs=crs,
+                                    method=method, progress=scaled(progress, 0.25, 0.95))
     _clip_to_extent(network, shapely.box(*extent) if observed is None else observed)
     network.qa["gap_edges"] = gaps
     report(progress, 1.0, f"{len(network.centrelines)} roads, "
@@ -689,10 +701,11 @@ def without_lines(raster: GeoRaster, lines, *, margin_m: float = 1.0,
 
 
 def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = THRESHOLD,
-                      method: str = METHOD, part_options: dict | None = None,
-                      gap_options: dict | None = None, weight_options: dict | None = None,
-                      network_options: dict | None = None, wide_areas: bool = False,
-                      progress: Progress = None) -> RoadNetwork:
+                      method: str = METHOD, part_options: PartOptions = PartOptions(),
+                      gap_options: GapOptions = RASTER_GAPS,
+                      weight_options: WeightOptions = RASTER_WEIGHTS,
+                      network_options: NetworkOptions = RASTER_NETWORK,
+                      wide_areas: bool = False, progress: Progress = None) -> RoadNetwork:
     """A road raster (mask or probability) to the road-network contract.
 
     Parameters
@@ -705,10 +718,13 @@ def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = TH
         Road probability threshold (0-1; a 0-255 raster is scaled to 0-1 first).
     method : str
         The ``method`` of every centre line.
-    part_options : dict, optional
-        Keyword arguments of :func:`skeleton_parts`.
-    gap_options, weight_options, network_options : dict, optional
-        See :func:`parts_to_network`.
+    part_options : PartOptions
+        Mask cleaning, skeleton pruning and tiles (:func:`skeleton_parts`); its
+        ``low_threshold`` (when set) also bounds the road of the junction connections and
+        of the wide paved areas.
+    gap_options, weight_options, network_options : GapOptions, WeightOptions, NetworkOptions
+        See :func:`parts_to_network` (defaults :data:`RASTER_GAPS`, :data:`RASTER_WEIGHTS`,
+        :data:`RASTER_NETWORK`).
     wide_areas : bool
         Take out the lines drawn in wide paved areas (car parks, plazas: their outlines,
         aisles and accesses, :mod:`gisroads.network.areas`) and build the network again
@@ -755,9 +771,9 @@ def raster_to_network(raster: GeoRaster, *, band: int = 1, threshold: float = TH
                    gap_options=gap_options, weight_options=weight_options,
                    network_options=network_options)
     end = 0.7 if wide_areas else 1.0
-    parts = skeleton_parts(probability, threshold=threshold, **(part_options or {}),
+    parts = skeleton_parts(probability, part_options, threshold=threshold,
                            progress=scaled(progress, 0.0, 0.6 * end))
-    low = (part_options or {}).get("low_threshold")
+    low = part_options.low_threshold
     network = parts_to_network(
         parts, extent=probability.bounds, crs=probability.crs, method=method,
         observed=_observed(probability), probability=probability,

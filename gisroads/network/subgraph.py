@@ -542,9 +542,34 @@ def linear_weight(values, good: float, bad: float) -> np.ndarray:
     return np.where(np.isnan(values), 1.0, weight)
 
 
-def edge_weights(gaps: gpd.GeoDataFrame, *, weight_ranges: dict | None = None,
-                 relation_values: dict | None = None, small_gap_m: float = SMALL_GAP_M,
-                 good_context: float = GOOD_CONTEXT) -> gpd.GeoDataFrame:
+@dataclass(frozen=True)
+class WeightOptions:
+    """The options of :func:`edge_weights`: the ranges of the relation weight's linear
+    weight functions, the context relation values, and how the two weights combine.
+
+    Attributes
+    ----------
+    weight_ranges : dict, optional
+        Feature name -> ``(good, bad)``, in the feature's unit (metres, radians, 0..1),
+        updating :data:`WEIGHT_RANGES` (None: those).
+    relation_values : dict, optional
+        Relation category -> ``v_k`` (Eq. 2), updating :data:`RELATION_VALUES` (None:
+        those).
+    small_gap_m : float
+        Gaps shorter than this take their relation weight alone (context too short to
+        judge), metres.
+    good_context : float
+        The context weight a link of relation weight 0 needs to be kept.
+    """
+
+    weight_ranges: dict | None = None
+    relation_values: dict | None = None
+    small_gap_m: float = SMALL_GAP_M
+    good_context: float = GOOD_CONTEXT
+
+
+def edge_weights(gaps: gpd.GeoDataFrame, options: WeightOptions = WeightOptions(),
+                 **changes) -> gpd.GeoDataFrame:
     """Weights ``w_i`` of the gap edges (Sec. 2.2.2).
 
     - Relation weight ``w_R``: the product of :func:`linear_weight` of the six features
@@ -562,13 +587,11 @@ def edge_weights(gaps: gpd.GeoDataFrame, *, weight_ranges: dict | None = None,
     ----------
     gaps : GeoDataFrame
         From :func:`gap_edges`, optionally through :func:`gap_context`.
-    weight_ranges : dict, optional
-        Feature name -> ``(good, bad)``; defaults :data:`WEIGHT_RANGES` (updated by this).
-    relation_values : dict, optional
-        Category -> ``v_k``; defaults :data:`RELATION_VALUES` (updated by this).
-    small_gap_m : float
-        Metres.
-    good_context : float
+    options : WeightOptions
+        Weight ranges, relation values, ``small_gap_m`` and ``good_context``
+        (:class:`WeightOptions`).
+    **changes
+        Fields of ``options`` to change for this call.
 
     Returns
     -------
@@ -576,8 +599,9 @@ def edge_weights(gaps: gpd.GeoDataFrame, *, weight_ranges: dict | None = None,
         ``gaps`` with ``relation_weight``, ``context_weight`` (NaN without context) and
         ``weight``.
     """
-    ranges = {**WEIGHT_RANGES, **(weight_ranges or {})}
-    values = {**RELATION_VALUES, **(relation_values or {})}
+    options = replace(options, **changes)
+    ranges = {**WEIGHT_RANGES, **(options.weight_ranges or {})}
+    values = {**RELATION_VALUES, **(options.relation_values or {})}
     unknown = (set(ranges) - set(WEIGHT_RANGES)) | (set(values) - set(RELATION_VALUES))
     if unknown:
         raise GisroadsError(f"unknown features or relation categories {sorted(unknown)}")
@@ -597,12 +621,13 @@ def edge_weights(gaps: gpd.GeoDataFrame, *, weight_ranges: dict | None = None,
         context += harmonic @ np.array(list(values.values()))
     else:
         context = np.full(len(gaps), np.nan)
-    ignored = np.isnan(context) | (gaps["distance_m"].to_numpy(float) < small_gap_m)
+    ignored = np.isnan(context) | (gaps["distance_m"].to_numpy(float) < options.small_gap_m)
     mean = (relation + context) / 2
     weight = np.where(ignored, relation,
                       np.where(context < 0, 0.0,
                                np.where(relation == 0,
-                                        np.where(context >= good_context, mean, 0.0),
+                                        np.where(context >= options.good_context, mean,
+                                                 0.0),
                                         mean)))
     out = gaps.copy()
     out["relation_weight"] = relation
@@ -770,11 +795,12 @@ def mean_along(values: np.ndarray, transform: Affine, lines, step_m: float) -> n
             / np.maximum(np.bincount(owner, minlength=len(lines)), 1))
 
 
-def _probability_context(gaps, transform, probability, ndsm, context_options, progress):
+def _probability_context(gaps, transform, probability, ndsm, context_options: ContextOptions,
+                         progress):
     """Gap context from a learned road probability (and buildings, vehicles from an nDSM)."""
     if ndsm is not None:
-        gaps = gap_context(gaps, transform=transform, ndsm=ndsm, progress=progress,
-                           **(context_options or {}))
+        gaps = gap_context(gaps, context_options, transform=transform, ndsm=ndsm,
+                           progress=progress)
         gaps["context_cues"] = "ndsm,probability"
     else:
         gaps = gaps.copy()
@@ -789,8 +815,9 @@ def _probability_context(gaps, transform, probability, ndsm, context_options, pr
 
 def link_road_parts(road_parts: gpd.GeoDataFrame, *, transform: Affine | None = None,
                     ndvi=None, ndsm=None, intensity=None, rgb=None, probability=None,
-                    gap_options: dict | None = None, context_options: dict | None = None,
-                    weight_options: dict | None = None, progress: Progress = None):
+                    gap_options: GapOptions = GapOptions(),
+                    context_options: ContextOptions = ContextOptions(),
+                    weight_options: WeightOptions = WeightOptions(), progress: Progress = None):
     """Subgraph generation and evaluation in one call: :func:`gap_edges`, :func:`gap_context`
     (when a raster and its ``transform`` are given), :func:`edge_weights`,
     :func:`select_gap_edges`, :func:`road_strings`.
@@ -807,8 +834,12 @@ def link_road_parts(road_parts: gpd.GeoDataFrame, *, transform: Affine | None = 
         :func:`gisroads.network.rasters.link_gaps` does) and the radiometric categories
         (trees, vegetated areas, shadow, asphalt) are left out; buildings and vehicles
         still come from the nDSM when given.
-    gap_options, context_options, weight_options : dict, optional
-        Keyword arguments of :func:`gap_edges`, :func:`gap_context`, :func:`edge_weights`.
+    gap_options : GapOptions
+        The limits of a gap edge (:func:`gap_edges`).
+    context_options : ContextOptions
+        The thresholds of the context classes (:func:`gap_context`).
+    weight_options : WeightOptions
+        The weights of the gap edges (:func:`edge_weights`).
     progress : callable, optional
 
     Returns
@@ -819,7 +850,7 @@ def link_road_parts(road_parts: gpd.GeoDataFrame, *, transform: Affine | None = 
         The road strings.
     """
     report(progress, 0.0, "linking road parts")
-    gaps = gap_edges(road_parts, **(gap_options or {}))
+    gaps = gap_edges(road_parts, gap_options)
     if probability is not None:
         if transform is None:
             raise GisroadsError("the probability raster needs its transform")
@@ -828,10 +859,9 @@ def link_road_parts(road_parts: gpd.GeoDataFrame, *, transform: Affine | None = 
     elif any(r is not None for r in (ndvi, ndsm, intensity, rgb)):
         if transform is None:
             raise GisroadsError("context rasters need their transform")
-        gaps = gap_context(gaps, transform=transform, ndvi=ndvi, ndsm=ndsm,
-                           intensity=intensity, rgb=rgb, progress=scaled(progress, 0.1, 0.8),
-                           **(context_options or {}))
-    gaps = select_gap_edges(edge_weights(gaps, **(weight_options or {})))
+        gaps = gap_context(gaps, context_options, transform=transform, ndvi=ndvi, ndsm=ndsm,
+                           intensity=intensity, rgb=rgb, progress=scaled(progress, 0.1, 0.8))
+    gaps = select_gap_edges(edge_weights(gaps, weight_options))
     report(progress, 0.9, "chaining road strings")
     strings = road_strings(road_parts, gaps)
     report(progress, 1.0, "road strings done")

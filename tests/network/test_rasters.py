@@ -1,4 +1,6 @@
 """Any road raster to a network: hand-drawn masks with exact answers, then a real mask."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import shapely
@@ -8,7 +10,8 @@ from pyproj import CRS
 from gisroads.evaluate.buffer import buffer_metrics
 from gisroads.evaluate.topology import line_graph, topology_metrics
 from gisroads.geo import GeoRaster
-from gisroads.network.rasters import raster_to_network, road_probability, skeleton_parts
+from gisroads.network.rasters import (RASTER_NETWORK, PartOptions, raster_to_network,
+                                      road_probability, skeleton_parts)
 
 UTM = CRS.from_epsg(32633)
 PIXEL_M = 0.5
@@ -69,7 +72,7 @@ def test_a_cut_road_is_bridged_and_parallel_roads_are_not_joined():
     mask[220:236, :250] = 1             # another road, parallel, 80 m away, ends mid-raster
     raster = _raster(mask)
     # the gap edges' bridge: the raster repair of straight cuts (tested below) off
-    network = raster_to_network(raster, part_options={"max_cut_m": 0})
+    network = raster_to_network(raster, part_options=PartOptions(max_cut_m=0))
     gaps = network.qa["gap_edges"]
     assert gaps.selected.sum() == 1
     bridged = gaps[gaps.selected].geometry.iloc[0]
@@ -92,7 +95,8 @@ def test_a_false_blob_is_not_joined_across_a_block():
     network = raster_to_network(raster)
     assert len(network.junctions) == 0
     assert network.centrelines.distance(shapely.Point(_xy(raster, 110, 200))).min() > 5
-    joined = raster_to_network(raster, network_options={"max_unsupported_m": np.inf})
+    joined = raster_to_network(raster, network_options=replace(RASTER_NETWORK,
+                                                               max_unsupported_m=np.inf))
     assert len(joined.junctions) == 1          # what the unsupported length prevents
 
 
@@ -131,7 +135,7 @@ def test_tiles_are_stitched_into_the_same_network():
     mask[100:400, 450:466] = 1          # a road crossing tile seams
     raster = _raster(mask)
     whole = raster_to_network(raster)
-    tiled = raster_to_network(raster, part_options={"tile_px": 128, "overlap_px": 64})
+    tiled = raster_to_network(raster, part_options=PartOptions(tile_px=128, overlap_px=64))
     assert len(tiled.junctions) == len(whole.junctions)
     assert len(tiled.centrelines) == len(whole.centrelines)
     np.testing.assert_allclose(tiled.centrelines.length_m.sum(),
@@ -187,7 +191,7 @@ def test_hysteresis_keeps_a_road_whole_through_a_weak_stretch_and_weak_blobs_out
     assert not mask[20:40, 100:160].any()  # the blob is not seeded
     # through the network stage: one road across the raster
     network = raster_to_network(_raster(probability), threshold=0.8,
-                                part_options={"low_threshold": 0.6})
+                                part_options=PartOptions(low_threshold=0.6))
     assert len(network.centrelines) == 1
     assert network.centrelines.length_m.iloc[0] > 0.95 * 200
 
@@ -213,7 +217,7 @@ def test_a_wide_road_cut_twice_is_one_straight_line_along_it():
     assert line.length > 200 - 15.5          # the whole road, less half a width at each end
     assert len(network.qa["gap_edges"]) == 0  # closed in the raster, before the skeleton
     # the piece alone gives nothing the gap edges can link: two roads, the cut stays open
-    assert len(raster_to_network(raster, part_options={"max_cut_m": 0}).centrelines) == 2
+    assert len(raster_to_network(raster, part_options=PartOptions(max_cut_m=0)).centrelines) == 2
 
 
 @pytest.mark.parametrize("smoothed", [False, True])
