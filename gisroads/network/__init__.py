@@ -26,12 +26,13 @@ from .. import _lazy_exports
 __all__ = [
     "ContextOptions", "GapOptions", "NetworkOptions", "PartOptions", "WeightOptions",
     "link_gaps", "link_road_parts", "parts_to_network", "raster_to_network", "road_mask",
-    "road_probability", "skeleton_parts", "strings_to_network",
+    "road_probability", "skeleton_parts", "strings_to_network", "with_missing_roads",
 ]
 
 __getattr__, __dir__ = _lazy_exports(__name__, {
     **dict.fromkeys(["PartOptions", "link_gaps", "parts_to_network", "raster_to_network",
-                     "road_mask", "road_probability", "skeleton_parts"], ".rasters"),
+                     "road_mask", "road_probability", "skeleton_parts",
+                     "with_missing_roads"], ".rasters"),
     **dict.fromkeys(["ContextOptions", "GapOptions", "WeightOptions", "link_road_parts"],
                     ".subgraph"),
     **dict.fromkeys(["NetworkOptions", "strings_to_network"], ".junctions"),

@@ -116,6 +116,12 @@ RASTER_WEIGHTS = WeightOptions(weight_ranges={"width_diff_m": (0.0, 10.0)})
 RASTER_NETWORK = NetworkOptions(min_search_radius_m=15.0, max_search_radius_m=45.0,
                                 max_unsupported_m=20.0)
 
+#: :func:`with_missing_roads`: another network's line is missing from a network where it runs
+#: farther than this beyond the half width of the network's roads, over pieces at least
+#: MISSING_MIN_M long, metres.
+MISSING_MARGIN_M = 1.0
+MISSING_MIN_M = 5.0
+
 _SEAM_SNAP_PX = 1.5
 
 
@@ -677,6 +683,63 @@ def parts_to_network(parts: gpd.GeoDataFrame, *, extent, crs, method: str = METH
     report(progress, 1.0, f"{len(network.centrelines)} roads, "
                           f"{len(network.junctions)} junctions")
     return network
+
+
+def with_missing_roads(network: RoadNetwork, other: gpd.GeoDataFrame,
+                       probability: GeoRaster, *, method: str = METHOD,
+                       margin_m: float = MISSING_MARGIN_M,
+                       min_length_m: float = MISSING_MIN_M,
+                       progress: Progress = None) -> RoadNetwork:
+    """``network`` with the roads of another network of the same raster's area that it
+    lacks, joined to its roads by the network stage.
+
+    The pieces of ``other``'s lines farther than ``margin_m`` beyond the half width of
+    ``network``'s roads, at least ``min_length_m`` long, and ``network``'s roads are the
+    road parts of :func:`parts_to_network` (gaps bridged, junctions built, lines split at
+    them), on ``probability``'s extent and valid pixels.
+
+    Parameters
+    ----------
+    network : RoadNetwork
+        Centre lines with ``width_m`` (metres) and ``score`` (0-1).
+    other : GeoDataFrame
+        Centre lines with ``width_m`` and ``score`` in the same CRS, e.g. another cue's.
+    probability : GeoRaster
+        The raster ``network`` was built on: its extent, CRS and valid pixels.
+    method : str
+        The ``method`` of every centre line.
+    margin_m, min_length_m : float
+        Metres.
+    progress : callable, optional
+
+    Returns
+    -------
+    RoadNetwork
+        ``network`` itself when ``other`` adds nothing; else a new network with the QA
+        layers of this run and ``rejected`` kept from ``network``.
+    """
+    roads = network.centrelines
+    pieces = other
+    if len(roads) and len(other):
+        cover = shapely.union_all(shapely.buffer(
+            roads.geometry.values, roads["width_m"].to_numpy(float) / 2 + margin_m))
+        pieces = other.assign(geometry=shapely.difference(other.geometry.values, cover))
+        pieces = pieces.explode(index_parts=False)
+    pieces = pieces[(pieces.geom_type == "LineString")
+                    & (shapely.length(pieces.geometry.values) >= min_length_m)]
+    if not len(pieces):
+        return network
+    both = pd.concat([roads[["width_m", "score", "geometry"]],
+                      pieces[["width_m", "score", "geometry"]]], ignore_index=True)
+    parts = gpd.GeoDataFrame(
+        {"part_id": np.arange(len(both), dtype=np.int64),
+         "width_m": both["width_m"].to_numpy(float), "quality": both["score"].to_numpy(float)},
+        geometry=both.geometry.values, crs=probability.crs)
+    merged = parts_to_network(parts, extent=probability.bounds, crs=probability.crs,
+                              method=method, observed=_observed(probability),
+                              progress=progress)
+    merged.qa["rejected"] = network.qa.get("rejected", _rejected([], [], probability.crs))
+    return merged
 
 
 def without_lines(raster: GeoRaster, lines, *, margin_m: float = 1.0,

@@ -11,7 +11,7 @@ from gisroads.evaluate.buffer import buffer_metrics
 from gisroads.evaluate.topology import line_graph, topology_metrics
 from gisroads.geo import GeoRaster
 from gisroads.network.rasters import (RASTER_NETWORK, PartOptions, raster_to_network,
-                                      road_probability, skeleton_parts)
+                                      road_probability, skeleton_parts, with_missing_roads)
 
 UTM = CRS.from_epsg(32633)
 PIXEL_M = 0.5
@@ -63,6 +63,26 @@ def test_t_junction_is_one_node_at_the_crossing_with_widths_and_no_spurs():
              shapely.LineString([_xy(raster, 200, 200), _xy(raster, 400, 200)])]
     metrics = buffer_metrics(network.centrelines, truth, buffer_m=2.0)
     assert metrics.completeness > 0.95 and metrics.correctness > 0.95
+
+
+def test_the_roads_another_network_has_are_added_and_joined_at_their_junction():
+    raster = _raster(_crossing())
+    whole = raster_to_network(raster)
+    mask = _crossing()
+    mask[208:, :] = 0  # the T's stem gone: one straight road
+    lacking = raster_to_network(_raster(mask))
+    assert len(lacking.centrelines) == 1 and len(lacking.junctions) == 0
+    merged = with_missing_roads(lacking, whole.centrelines, raster)
+    # the stem joins the road at one T, the road split there
+    assert len(merged.junctions) == 1 and merged.junctions.degree.iloc[0] == 3
+    assert len(merged.centrelines) == 3
+    x, y = _xy(raster, 200, 200)
+    assert merged.junctions.geometry.iloc[0].distance(shapely.Point(x, y)) < 2.0
+    scores = buffer_metrics(merged.centrelines, whole.centrelines, buffer_m=1.0)
+    assert scores.completeness > 0.97 and scores.correctness > 0.97
+    # lines along the network's own roads add nothing: the same object back
+    assert with_missing_roads(whole, whole.centrelines, raster) is whole
+    assert with_missing_roads(lacking, whole.centrelines.iloc[:0], raster) is lacking
 
 
 def test_a_cut_road_is_bridged_and_parallel_roads_are_not_joined():
