@@ -717,6 +717,28 @@ def with_missing_roads(network: RoadNetwork, other: gpd.GeoDataFrame,
     RoadNetwork
         ``network`` itself when ``other`` adds nothing; else a new network with the QA
         layers of this run and ``rejected`` kept from ``network``.
+
+    Examples
+    --------
+    A T of two 8 m roads at 0.5 m cells, and the same raster without the T's stem:
+
+    >>> import numpy as np
+    >>> from affine import Affine
+    >>> from pyproj import CRS
+    >>> from gisroads.geo import GeoRaster
+    >>> from gisroads.network import raster_to_network, with_missing_roads
+    >>> mask = np.zeros((400, 400), np.uint8)
+    >>> mask[192:208, :] = 1
+    >>> mask[200:, 192:208] = 1
+    >>> grid, utm = Affine(0.5, 0.0, 500000.0, 0.0, -0.5, 5000000.0), CRS.from_epsg(32633)
+    >>> t = GeoRaster(mask, grid, utm)
+    >>> road = GeoRaster(np.where(np.arange(400)[:, None] < 208, mask, 0), grid, utm)
+    >>> lacking = raster_to_network(road)
+    >>> len(lacking.centrelines), len(lacking.junctions)
+    (1, 0)
+    >>> merged = with_missing_roads(lacking, raster_to_network(t).centrelines, t)
+    >>> len(merged.centrelines), merged.junctions.degree.tolist()
+    (3, [3])
     """
     roads = network.centrelines
     pieces = other
