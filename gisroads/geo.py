@@ -62,6 +62,8 @@ class GeoRaster:
     transform : affine.Affine
         Pixel (col, row) to map (x, y) of the pixel's upper-left corner.
     crs : pyproj.CRS or None
+        A string or an EPSG code (``"EPSG:32633"``, ``32633``) is read as a
+        :class:`pyproj.CRS`.
     nodata : float or None
     """
 
@@ -69,6 +71,10 @@ class GeoRaster:
     transform: Affine
     crs: CRS | None
     nodata: float | None = None
+
+    def __post_init__(self):
+        if isinstance(self.crs, (str, int)):
+            object.__setattr__(self, "crs", CRS.from_user_input(self.crs))
 
     @property
     def shape(self) -> tuple[int, int]:
