@@ -35,7 +35,7 @@ centre lines are, then one network stage (junctions, significance) over the whol
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -603,8 +603,8 @@ def _road_strings(image: GeoRaster, probability: GeoRaster | None, *, nir_band, 
                             progress=scaled(progress, 0.45, 0.65))
     lap("grouping")
     parts = extract_road_parts(labels, image, cues=cues, edge_magnitude=edges,
-                               progress=scaled(progress, 0.65, 0.88),
-                               **asdict(road_part_criteria))
+                               criteria=road_part_criteria,
+                               progress=scaled(progress, 0.65, 0.88))
     lap("road_parts")
     context = context_rasters(cues)
     if cues.probability is not None:

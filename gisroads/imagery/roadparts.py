@@ -744,7 +744,7 @@ def _crop(cues: ImageCues, window) -> ImageCues:
 def merge_adjacent_parts(segments: gpd.GeoDataFrame, labels, image: GeoRaster,
                          cues: ImageCues, *, edge_magnitude=None,
                          max_direction_diff_rad: float = np.radians(20.0),
-                         criteria: dict | None = None):
+                         criteria: RoadPartCriteria = RoadPartCriteria()):
     """Merge adjacent road parts of similar direction when the merged region still passes.
 
     Pairs of passing parts that share a border and whose main directions differ by at most
@@ -767,8 +767,8 @@ def merge_adjacent_parts(segments: gpd.GeoDataFrame, labels, image: GeoRaster,
         The edge strength they were measured with (default as :func:`measure_segments`).
     max_direction_diff_rad : float
         Largest difference of main directions (radians; 20 degrees by default).
-    criteria : dict, optional
-        Keyword arguments of :func:`filter_road_parts`.
+    criteria : RoadPartCriteria
+        The criteria a merged region must pass (:func:`filter_road_parts`).
 
     Returns
     -------
@@ -778,11 +778,7 @@ def merge_adjacent_parts(segments: gpd.GeoDataFrame, labels, image: GeoRaster,
     labels : ndarray
         The label image with the merges applied.
     """
-    unknown = set(criteria or {}) - set(CRITERIA)
-    if unknown:
-        raise GisroadsError(f"unknown road-part criteria {sorted(unknown)}; "
-                            f"choose from {sorted(CRITERIA)}")
-    criteria = {**CRITERIA, **(criteria or {})}
+    criteria = asdict(criteria)
     pixel_m = _metric_pixel(image)
     labels = _check_labels(labels, image.shape).copy()
     edges = local_energy(cues.intensity)[0] if edge_magnitude is None else \
@@ -852,7 +848,8 @@ def extract_road_parts(labels, image: GeoRaster, *, nir_band: int | None = None,
                        cues: ImageCues | None = None, edge_magnitude=None,
                        merge: bool = True,
                        max_direction_diff_rad: float = np.radians(20.0),
-                       progress: Progress = None, **criteria) -> RoadParts:
+                       criteria: RoadPartCriteria = RoadPartCriteria(),
+                       progress: Progress = None, **changes) -> RoadParts:
     """Road parts of a segmentation: measure, filter, merge adjacent parts, filter.
 
     Parameters
@@ -872,18 +869,21 @@ def extract_road_parts(labels, image: GeoRaster, *, nir_band: int | None = None,
         Run :func:`merge_adjacent_parts`.
     max_direction_diff_rad : float
         See :func:`merge_adjacent_parts`.
+    criteria : RoadPartCriteria
+        The criteria of :func:`filter_road_parts`.
     progress : callable, optional
-    **criteria
-        Thresholds of :func:`filter_road_parts`.
+    **changes
+        Fields of ``criteria`` to change for this call.
 
     Returns
     -------
     RoadParts
     """
-    unknown = set(criteria) - set(CRITERIA)
+    unknown = set(changes) - set(CRITERIA)
     if unknown:
         raise GisroadsError(f"unknown road-part criteria {sorted(unknown)}; "
                             f"choose from {sorted(CRITERIA)}")
+    criteria = replace(criteria, **changes)
     report(progress, 0.0, "image cues")
     if cues is None:
         cues = image_cues(image, nir_band=nir_band, red_band=red_band, dsm=dsm)
@@ -891,7 +891,7 @@ def extract_road_parts(labels, image: GeoRaster, *, nir_band: int | None = None,
         edge_magnitude = local_energy(cues.intensity)[0]
     segments = measure_segments(labels, image, cues=cues, edge_magnitude=edge_magnitude,
                                 progress=scaled(progress, 0.1, 0.8))
-    segments, road_parts = filter_road_parts(segments, **criteria)
+    segments, road_parts = filter_road_parts(segments, criteria)
     labels = np.asarray(labels)
     if merge:
         report(progress, 0.8, "merging adjacent parts")

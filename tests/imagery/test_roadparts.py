@@ -11,7 +11,7 @@ from skimage.measure import label as connected_regions
 
 from gisroads.geo import GeoRaster
 from gisroads.imagery.cues import image_cues
-from gisroads.imagery.roadparts import (extract_road_parts, filter_road_parts,
+from gisroads.imagery.roadparts import (RoadPartCriteria, extract_road_parts, filter_road_parts,
                                         measure_segments, merge_adjacent_parts,
                                         rasterize_segments)
 from gisroads.synthetic import make_scene, render_image
@@ -224,7 +224,8 @@ def test_merge_is_refused_when_the_union_fails():
     criteria = {"width_constancy_min": 3.0}     # each piece has a constant width
     segments, _ = filter_road_parts(measure_segments(labels, image, cues=cues), **criteria)
     assert segments.passed.tolist() == [False, True, True]
-    refused, same = merge_adjacent_parts(segments, labels, image, cues, criteria=criteria)
+    refused, same = merge_adjacent_parts(segments, labels, image, cues,
+                                         criteria=RoadPartCriteria(**criteria))
     assert list(refused.segment_id) == [0, 1, 2]
     np.testing.assert_array_equal(same, labels)
     merged, new_labels = merge_adjacent_parts(segments, labels, image, cues)  # 1.7
