@@ -195,6 +195,29 @@ def line_end_degrees(lines, *, snap_m: float = 1e-6) -> tuple[np.ndarray, np.nda
     return nodes, np.bincount(node_of_end, minlength=len(nodes))
 
 
+def dead_end_lines(lines, *, snap_m: float = 1e-6) -> np.ndarray:
+    """Which noded lines have an end that no other line meets (a dead end, a cut at the
+    data's edge).
+
+    Parameters
+    ----------
+    lines : array_like of LineString
+        Already noded (see :func:`node_lines`).
+    snap_m : float
+        End points closer than this (CRS units) are the same node.
+
+    Returns
+    -------
+    ndarray of bool, shape (m,)
+    """
+    lines = np.asarray(lines, dtype=object)
+    if len(lines) == 0:
+        return np.zeros(0, dtype=bool)
+    _, node_of_end = _end_nodes(lines, snap_m)
+    degree = np.bincount(node_of_end)
+    return (degree[node_of_end] == 1).reshape(2, -1).any(axis=0)
+
+
 @dataclass(frozen=True)
 class LineGraph:
     """A noded line network as a graph.

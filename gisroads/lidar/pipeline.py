@@ -50,8 +50,8 @@ from ..tiling.tiles import OVERLAP_M, TILE_M, Tile, stitch_tiles
 from ..tiling.tilestore import (TileStore, code_fingerprint, digest, file_digest, inputs_crs,
                                 las_inputs, open_store)
 from .evidence import (CAR_PARK_FLANK_SHARE, FLANK_DEPTH_M, FLANK_GAP_M, PAVED_LIKELIHOOD,
-                       SHORE_FLANK_SHARE, dropout_cells, road_evidence, vehicle_cells,
-                       without_flanked_roads)
+                       SHORE_FLANK_SHARE, dropout_cells, kerb_cells, road_evidence,
+                       vehicle_cells, without_flanked_roads, without_unkerbed_ways)
 from .ground import T_PLANAR, T_VERT, GroundPlanes, ground_planes
 from .learned import (evidence_features, fit_evidence_model, learned_likelihood,
                       load_evidence_model)
@@ -87,8 +87,10 @@ class EvidenceMosaic(NamedTuple):
     likelihood: GeoRaster | None
     """2-D road likelihood, float32 in [0, 1], NaN outside the data, working metre CRS."""
     flanks: GeoRaster | None
-    """Two bands on the same grid: vehicle cells (:func:`gisroads.lidar.evidence.vehicle_cells`)
-    and pulse dropout cells (:func:`gisroads.lidar.evidence.dropout_cells`)."""
+    """Three bands on the same grid: vehicle cells
+    (:func:`gisroads.lidar.evidence.vehicle_cells`), pulse dropout cells
+    (:func:`gisroads.lidar.evidence.dropout_cells`) and kerb cells
+    (:func:`gisroads.lidar.evidence.kerb_cells`)."""
     ground_intensity: GeoRaster | None
     """2-D mean intensity of the ground's last returns over that of the bright ground, on the
     same grid; NaN where the file records none: what the roads are seen over."""
@@ -312,7 +314,7 @@ def _run_tile(job: _TileJob, tile: Tile, progress: Progress = None):
                       else learned_likelihood(evidence, _evidence_model(job.model)))
             intensity = evidence.measures.get("intensity")
             bands = np.stack([raster.data, vehicle_cells(evidence).data,
-                              dropout_cells(evidence).data,
+                              dropout_cells(evidence).data, kerb_cells(evidence).data,
                               np.full(raster.data.shape, np.nan, np.float32)
                               if intensity is None else intensity.data])
             if job.features:
@@ -473,7 +475,7 @@ def _evidence_from_store(store: TileStore, *, cell_m, min_points, workers, sched
     _, _, used, missing = next(r for r in results if r is not None)
     mosaic = mosaic_cores(pieces, cell_m)
     band = [GeoRaster(data, mosaic.transform, mosaic.crs)
-            for data in (mosaic.data[0], mosaic.data[1:3], mosaic.data[3], mosaic.data[4:])]
+            for data in (mosaic.data[0], mosaic.data[1:4], mosaic.data[4], mosaic.data[5:])]
     return EvidenceMosaic(*band[:3], used, missing, band[3] if features else None)
 
 
@@ -510,8 +512,8 @@ def _evidence_roads(path, options: LidarOptions, *, model, progress: Progress,
         # car-park aisles are known by the cars that line them, shores (and the rims of
         # clearings around ponds) by the pulse dropouts of the water: out, and the network
         # again
-        vehicles, dropouts = (GeoRaster(band, flanks.transform, flanks.crs)
-                              for band in flanks.data)
+        vehicles, dropouts, kerbs = (GeoRaster(band, flanks.transform, flanks.crs)
+                                     for band in flanks.data)
         likelihood, taken = without_flanked_roads(
             likelihood, network.centrelines,
             {"car-park aisle": (vehicles, CAR_PARK_FLANK_SHARE),
@@ -522,8 +524,12 @@ def _evidence_roads(path, options: LidarOptions, *, model, progress: Progress,
         likelihood, accesses = without_car_park_accesses(likelihood, network.centrelines,
                                                          aisles)
         if len(accesses):
-            network = network_stage(likelihood, progress=scaled(progress, 0.9, 1.0))
-        network.qa[SERVICE_CENTRELINES] = service_lines(pd.concat([aisles, accesses]))
+            network = network_stage(likelihood, progress=scaled(progress, 0.9, 0.95))
+        likelihood, unkerbed = without_unkerbed_ways(likelihood, network.centrelines, kerbs)
+        if len(unkerbed):
+            network = network_stage(likelihood, progress=scaled(progress, 0.95, 1.0))
+        network.qa[SERVICE_CENTRELINES] = service_lines(pd.concat([aisles, accesses,
+                                                                   unkerbed]))
     network.qa.setdefault(SERVICE_CENTRELINES, service_lines(network.centrelines.iloc[:0]))
     report(progress, 1.0, f"{len(network.centrelines)} roads, {len(network.junctions)} "
                           f"junctions, {len(network.qa[SERVICE_CENTRELINES])} service ways")

@@ -765,12 +765,16 @@ def with_missing_roads(network: RoadNetwork, other: gpd.GeoDataFrame,
 
 
 def without_lines(raster: GeoRaster, lines, *, margin_m: float = 1.0,
-                  area=None) -> GeoRaster:
+                  area=None, keep=None, spread_above: float | None = None) -> GeoRaster:
     """A copy of a road raster with the band ``width / 2 + margin_m`` (metres) of each of
     ``lines`` (LineStrings with ``width_m``, in its CRS) set to 0, and ``area`` (a shapely
     geometry, optional) too, NaN cells kept: run the network stage again on it and the
     lines are gone, the roads they touched joined and split as if they had never been
-    there."""
+    there. The bands ``width / 2`` of ``keep`` (lines with ``width_m``, optional) are left
+    as they are, so a way taken off a road does not cut the road where it joins it. With
+    ``spread_above``, the cells at least that likely that connect to the erased band
+    (outside ``keep``) go too: a paved area goes whole, not as a slot cut through it that
+    leaves its sides to be drawn again."""
     from rasterio import features
 
     data = np.array(raster.data, dtype=np.float32, copy=True)
@@ -781,6 +785,15 @@ def without_lines(raster: GeoRaster, lines, *, margin_m: float = 1.0,
     if shapes:
         erase = features.rasterize(shapes, out_shape=data.shape,
                                    transform=raster.transform).astype(bool)
+        kept = np.zeros(data.shape, bool)
+        if keep is not None and len(keep):
+            kept = features.rasterize(
+                shapely.buffer(keep.geometry.values, keep["width_m"].to_numpy(float) / 2),
+                out_shape=data.shape, transform=raster.transform).astype(bool)
+        erase &= ~kept
+        if spread_above is not None:
+            labels, _ = ndimage.label((np.nan_to_num(data) >= spread_above) & ~kept)
+            erase |= np.isin(labels, np.unique(labels[erase & (labels > 0)]))
         data[erase & np.isfinite(data)] = 0.0
     return GeoRaster(data, raster.transform, raster.crs, nodata=raster.nodata)
 

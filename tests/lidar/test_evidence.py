@@ -356,16 +356,18 @@ def test_fusa_car_park_aisles_go_to_the_service_layer(lidar_dir):
     service_truth = read_layer(truth / "service.geojson")
     roads_truth = read_layer(truth / "centrelines.geojson")
     assert (service["kind"] == "service").all()
-    assert set(service["reason"]) == {"car-park aisle", "car-park access"}
+    assert set(service["reason"]) == {"car-park aisle", "car-park access", "unkerbed way"}
     assert (network.centrelines["kind"] == "road").all()
-    # measured: 9 aisles and 4 accesses, 396 m, correctness 0.857 against the service truth,
-    # completeness 0.714 (the aisles alone 0.510); none on a road of the truth
-    scores = buffer_metrics(service.to_crs(service_truth.crs), service_truth, buffer_m=3.0)
-    assert service.length.sum() > 300 and scores.correctness > 0.8
+    # measured: 9 aisles and 5 accesses, 462 m, correctness 0.831 against the service truth,
+    # completeness 0.817; none on a road of the truth. The unkerbed way (128 m) is the
+    # access strip along the west edge, which the service truth leaves out.
+    car_park = service[service["reason"] != "unkerbed way"]
+    scores = buffer_metrics(car_park.to_crs(service_truth.crs), service_truth, buffer_m=3.0)
+    assert car_park.length.sum() > 300 and scores.correctness > 0.8
     assert scores.completeness > 0.65
     roads = buffer_metrics(network.centrelines.to_crs(roads_truth.crs), roads_truth,
                            buffer_m=3.0)
-    assert roads.completeness > 0.9 and roads.correctness > 0.73  # 0.929 / 0.752
+    assert roads.completeness > 0.9 and roads.correctness > 0.84  # 0.919 / 0.857
     on_roads = buffer_metrics(service.to_crs(roads_truth.crs), roads_truth, buffer_m=3.0)
     assert on_roads.correctness < 0.05
     both = pd.concat([network.centrelines, service]).to_crs(service_truth.crs)
