@@ -195,27 +195,25 @@ def line_end_degrees(lines, *, snap_m: float = 1e-6) -> tuple[np.ndarray, np.nda
     return nodes, np.bincount(node_of_end, minlength=len(nodes))
 
 
-def dead_end_lines(lines, *, snap_m: float = 1e-6) -> np.ndarray:
-    """Which noded lines have an end that no other line meets (a dead end, a cut at the
-    data's edge).
+def free_line_ends(lines, *, snap_m: float = 1e-6) -> np.ndarray:
+    """Whether each noded line's start and end touch no other line (a dead end, or a cut
+    at the data's edge).
 
     Parameters
     ----------
-    lines : array_like of LineString
-        Already noded (see :func:`node_lines`).
-    snap_m : float
-        End points closer than this (CRS units) are the same node.
+    lines, snap_m
+        As :func:`line_end_degrees`.
 
     Returns
     -------
-    ndarray of bool, shape (m,)
+    ndarray of bool, shape (m, 2)
+        Per line, its start and its end.
     """
     lines = np.asarray(lines, dtype=object)
     if len(lines) == 0:
-        return np.zeros(0, dtype=bool)
+        return np.zeros((0, 2), dtype=bool)
     _, node_of_end = _end_nodes(lines, snap_m)
-    degree = np.bincount(node_of_end)
-    return (degree[node_of_end] == 1).reshape(2, -1).any(axis=0)
+    return (np.bincount(node_of_end)[node_of_end] == 1).reshape(2, -1).T
 
 
 @dataclass(frozen=True)

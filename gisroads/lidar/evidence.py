@@ -144,7 +144,7 @@ from scipy import ndimage
 
 from ..errors import GisroadsError
 from ..features.kerbs import KERB_GRADIENT, kerb_steps
-from ..geo import GeoRaster, dead_end_lines
+from ..geo import GeoRaster, free_line_ends
 from ..io.las import (BRIDGE_DECK_CLASS, GROUND_CLASS, NOISE_CLASSES, NOT_ROAD_CLASSES,
                       ROAD_SURFACE_CLASS, PointCloud)
 from ..network.rasters import without_lines
@@ -1149,7 +1149,7 @@ def without_unkerbed_ways(likelihood: GeoRaster, centrelines, kerbs: GeoRaster, 
         kerbed = length[known & (share >= unkerbed_share)].sum() / length[known].sum()
         if kerbed >= kerbed_network:
             found = (known & (share < unkerbed_share) & (length >= min_length_m)
-                     & dead_end_lines(centrelines.geometry.values))
+                     & free_line_ends(centrelines.geometry.values).any(axis=1))
     taken = centrelines[found].assign(reason="unkerbed way", kerb_share=share[found])
     return (without_lines(likelihood, taken, keep=centrelines[~found],
                           spread_above=PAVED_LIKELIHOOD), taken)

@@ -59,7 +59,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..errors import GisroadsError
-from ..geo import GeoRaster, RoadNetwork, _apply
+from ..geo import GeoRaster, RoadNetwork, _apply, free_line_ends
 from ..progress import Progress, report, scaled
 from ..vectorize.regions import segment_polygons
 from ..vectorize.ribbons import node_roads
@@ -486,16 +486,6 @@ def skeleton_parts(probability: GeoRaster, options: PartOptions = PartOptions(),
         geometry=gpd.GeoSeries(lines, crs=crs), crs=crs)
 
 
-def _free_ends(parts: gpd.GeoDataFrame) -> np.ndarray:
-    """``(n, 2)`` bool: whether each part's start / end touches no other part."""
-    lines = parts.geometry.values
-    ends = np.concatenate([shapely.get_coordinates(shapely.get_point(lines, 0)),
-                           shapely.get_coordinates(shapely.get_point(lines, -1))])
-    _, node, degree = np.unique(np.round(ends / 1e-6).astype(np.int64), axis=0,
-                                return_inverse=True, return_counts=True)
-    return (degree[node.ravel()] == 1).reshape(2, -1).T
-
-
 def link_gaps(parts: gpd.GeoDataFrame, probability: GeoRaster | None = None, *,
               gap_options: GapOptions = RASTER_GAPS, weight_options: WeightOptions = RASTER_WEIGHTS
               ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
@@ -523,7 +513,7 @@ def link_gaps(parts: gpd.GeoDataFrame, probability: GeoRaster | None = None, *,
     """
     gaps = gap_edges(parts, gap_options)
     if len(gaps):
-        free = _free_ends(parts)
+        free = free_line_ends(parts.geometry.values)
         row = pd.Series(np.arange(len(parts)), index=parts["part_id"].to_numpy())
         keep = (free[row[gaps["from_part"]].to_numpy(), gaps["from_end"].to_numpy()]
                 & free[row[gaps["to_part"]].to_numpy(), gaps["to_end"].to_numpy()])

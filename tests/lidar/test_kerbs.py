@@ -164,7 +164,7 @@ def kerbed_street_with_a_way():
 
 
 def test_kerb_share_is_high_along_a_kerbed_street_and_nil_along_a_way_without():
-    from gisroads.geo import dead_end_lines
+    from gisroads.geo import free_line_ends
     from gisroads.lidar.evidence import kerb_share
 
     _, kerbs, lines = kerbed_street_with_a_way()
@@ -174,8 +174,11 @@ def test_kerb_share_is_high_along_a_kerbed_street_and_nil_along_a_way_without():
     unknown = kerbs.data.copy()
     unknown[:] = np.nan
     assert np.isnan(kerb_share(lines, type(kerbs)(unknown, kerbs.transform, None))).all()
-    assert dead_end_lines(lines.geometry.values).tolist() == [True, True, True]
-    assert dead_end_lines(lines.geometry.values[1:]).tolist() == [True, True]
+    # the street's two halves meet the way at one node: only their outer ends are free
+    assert free_line_ends(lines.geometry.values).tolist() == [[True, False], [False, True],
+                                                              [False, True]]
+    assert free_line_ends(lines.geometry.values[1:]).tolist() == [[False, True],
+                                                                  [False, True]]
 
 
 def test_a_dead_end_way_without_kerbs_is_taken_with_its_apron_and_the_street_kept():
