@@ -763,8 +763,9 @@ def without_lines(raster: GeoRaster, lines, *, margin_m: float = 1.0,
     there. The bands ``width / 2`` of ``keep`` (lines with ``width_m``, optional) are left
     as they are, so a way taken off a road does not cut the road where it joins it. With
     ``spread_above``, the cells at least that likely that connect to the erased band
-    (outside ``keep``) go too: a paved area goes whole, not as a slot cut through it that
-    leaves its sides to be drawn again."""
+    (outside ``keep``) within one more width of each line go too: a paved area beside the
+    line goes whole, not as a slot cut through it that leaves its sides to be drawn again,
+    and the fringes of the kept roads beyond are left alone."""
     from rasterio import features
 
     data = np.array(raster.data, dtype=np.float32, copy=True)
@@ -782,7 +783,11 @@ def without_lines(raster: GeoRaster, lines, *, margin_m: float = 1.0,
                 out_shape=data.shape, transform=raster.transform).astype(bool)
         erase &= ~kept
         if spread_above is not None:
-            labels, _ = ndimage.label((np.nan_to_num(data) >= spread_above) & ~kept)
+            near = features.rasterize(
+                shapely.buffer(lines.geometry.values,
+                               lines["width_m"].to_numpy(float) * 1.5 + margin_m),
+                out_shape=data.shape, transform=raster.transform).astype(bool)
+            labels, _ = ndimage.label((np.nan_to_num(data) >= spread_above) & ~kept & near)
             erase |= np.isin(labels, np.unique(labels[erase & (labels > 0)]))
         data[erase & np.isfinite(data)] = 0.0
     return GeoRaster(data, raster.transform, raster.crs, nodata=raster.nodata)

@@ -191,6 +191,14 @@ def test_a_dead_end_way_without_kerbs_is_taken_with_its_apron_and_the_street_kep
     assert (erased.data[20:34, 20:180] == 1).all()  # the street whole, at the mouth too
     assert (erased.data[34:120, 94:120] == 0).all()  # the way and its apron
     assert (likelihood.data[80:120, 106:120] == 1).all()  # the input is left alone
+    # a paved fringe along the street's south edge (y 81.5-83), joined to the way: it goes
+    # within one more width of the way (x 40-60) and stays along the rest of the street
+    fringe = likelihood.data.copy()
+    fringe[34:37, 20:180] = 1.0
+    erased, _ = without_unkerbed_ways(type(likelihood)(fringe, likelihood.transform, None),
+                                      lines, kerbs)
+    assert (erased.data[34:37, 84:116] == 0).all()
+    assert (erased.data[34:37, 20:70] == 1).all() and (erased.data[34:37, 130:180] == 1).all()
     # where most roads have no kerbs (a village, a sparse cloud) nothing is taken
     bare = type(kerbs)(np.where(np.isfinite(kerbs.data), 0.0, np.nan).astype(np.float32),
                        kerbs.transform, None)
